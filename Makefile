@@ -1,0 +1,36 @@
+# Two entry points that do all the set-up on a fresh machine:
+#   make demo   - create .venv, install, make the tabletop-small scene, train GaussianDS, evaluate, report
+#   make test   - create .venv, install with the test extra, run the test suite
+PY ?= python3
+VENV := .venv
+VPY := $(VENV)/bin/python
+DEMO := demo_out
+PYTEST_ARGS ?=
+
+.PHONY: demo test install venv clean stress bench
+
+$(VPY):
+	$(PY) -m venv $(VENV)
+	$(VPY) -m pip install --quiet --upgrade pip
+
+# torch: use the CPU build of 2.13.0 from this machine's disk unless a torch is already importable.
+venv: $(VPY)
+	@$(VPY) -c "import torch" 2>/dev/null || $(VPY) -m pip install --quiet torch==2.13.0
+
+install: venv
+	$(VPY) -m pip install --quiet -e ".[test]"
+
+demo: install
+	bash scripts/demo.sh $(VENV) $(DEMO)
+
+test: install
+	$(VPY) -m pytest -q $(PYTEST_ARGS)
+
+stress: install
+	$(VENV)/bin/gsbench stress --out $(DEMO)/stress
+
+bench: install
+	$(VPY) benchmarks/render_cpu.py
+
+clean:
+	rm -rf $(VENV) $(DEMO) build *.egg-info

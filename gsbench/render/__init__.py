@@ -1,0 +1,85 @@
+"""render(): one function, plain tensors out, several backends behind it.
+
+    out = render(field, camera, backend="auto", background=None)
+    out.rgb (H,W,3), out.depth (H,W), out.features (H,W,d) or None, out.alpha (H,W)
+
+depth is camera-space z composited like colour (paper Eq. 4: sum_k T_k alpha_k z_k), not divided
+by alpha. Background is added to rgb only: rgb + (1 - alpha) * background.
+
+Backends:
+  torch  - the reference (plain PyTorch, autograd, any device/dtype); gsbench/render/torch_backend.py
+  cpu    - the fast CPU path (fused kernels, hand-written backward); gsbench/render/cpu_backend.py
+  gsplat - CUDA through gsplat.rasterization (optional extra `cuda`)
+  auto   - gsplat on CUDA tensors, cpu otherwise
+The numerical rules all backends share are in gsbench/render/rules.py.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field as dc_field
+from typing import Callable, Optional
+
+import torch
+
+from gsbench.gaussians import GaussianField
+from gsbench.render.projection import Projected, project_gaussians
+from gsbench.scene import Camera
+
+BACKENDS = ("torch", "cpu", "gsplat")
+
+
+@dataclass
+class RenderOutput:
+    rgb: torch.Tensor                 # (H, W, 3)
+    depth: torch.Tensor               # (H, W) camera-space z, alpha-composited
+    features: Optional[torch.Tensor]  # (H, W, d) or None
+    alpha: torch.Tensor               # (H, W) = 1 - final transmittance
+    backend: str = ""
+    means2d: Optional[torch.Tensor] = None   # (N, 2) screen positions; .grad after backward (densification)
+    radii: Optional[torch.Tensor] = None     # (N, 2) int screen half-extent, 0 where culled
+    info: dict = dc_field(default_factory=dict)
+
+
+def resolve_backend(backend: str, device: torch.device) -> str:
+    if backend == "auto":
+        return "gsplat" if device.type == "cuda" else "cpu"
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown render backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
+    return backend
+
+
+def _rasterizer(name: str) -> Callable:
+    if name == "torch":
+        from gsbench.render.torch_backend import rasterize_torch
+        return rasterize_torch
+    if name == "cpu":
+        from gsbench.render.cpu_backend import rasterize_cpu
+        return rasterize_cpu
+    raise ValueError(name)
+
+
+def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
+           background: Optional[torch.Tensor] = None) -> RenderOutput:
+    """Render RGB, depth, features and alpha of `field` seen from `camera`."""
+    device, dtype = field.means.device, field.means.dtype
+    name = resolve_backend(backend, device)
+    if name == "gsplat":
+        from gsbench.render.gsplat_backend import render_gsplat
+        return render_gsplat(field, camera, background=background)
+    if device.type == "cpu":
+        torch.set_flush_denormal(True)
+    proj: Projected = project_gaussians(field, camera)
+    cam_center = torch.as_tensor(camera.center, device=device, dtype=dtype)
+    rgb_g = field.rgb(cam_center)[proj.ids]
+    parts = [rgb_g, proj.depths[:, None]]
+    if field.features is not None:
+        parts.append(field.features[proj.ids])
+    channels = torch.cat(parts, dim=1)
+    out, t_final = _rasterizer(name)(proj, channels, camera.width, camera.height)
+    rgb = out[..., :3]
+    if background is not None:
+        bg = torch.as_tensor(background, device=device, dtype=dtype).reshape(1, 1, 3)
+        rgb = rgb + t_final[..., None] * bg
+    feats = out[..., 4:] if field.features is not None else None
+    return RenderOutput(rgb=rgb, depth=out[..., 3], features=feats, alpha=1.0 - t_final, backend=name,
+                        means2d=proj.means2d, radii=proj.radii,
+                        info={"n_visible": int(proj.ids.numel())})

@@ -1,0 +1,112 @@
+"""EWA projection of 3D Gaussians into a camera (differentiable, plain PyTorch).
+
+Shared by the `torch` and `cpu` backends: it is O(N) and vectorised, so the expensive part of
+a render is the rasterization that follows it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from gsbench.gaussians import LOG_SCALE_MAX, LOG_SCALE_MIN, GaussianField, normalize_quats, quat_to_rotmat
+from gsbench.render import rules
+from gsbench.scene import Camera
+
+
+@dataclass
+class Projected:
+    """Projected Gaussians. Tensors are indexed by `ids` (the visible subset, in field order)."""
+
+    ids: torch.Tensor        # (M,) long: indices into the field of the Gaussians that survived culling
+    means2d: torch.Tensor    # (N, 2) all Gaussians (zeros for culled ones); grads land here
+    conics: torch.Tensor     # (M, 3) inverse 2D covariance (a, b, c): [[a, b], [b, c]]
+    depths: torch.Tensor     # (M,) camera-space z
+    opacities: torch.Tensor  # (M,) sigmoid(opacity_logits)
+    radii: torch.Tensor      # (N, 2) int pixel half-extent of the screen box (0 = culled)
+    cov2d: torch.Tensor      # (M, 3) 2D covariance with low-pass (xx, xy, yy)
+
+
+def camera_tensors(camera: Camera, device, dtype) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    w2c = torch.as_tensor(camera.world_to_camera, device=device, dtype=dtype)
+    K = torch.as_tensor(camera.K, device=device, dtype=dtype)
+    return w2c[:3, :3], w2c[:3, 3], K
+
+
+def _cov2d(means_c: torch.Tensor, rot: torch.Tensor, scales: torch.Tensor, R_wc: torch.Tensor,
+           K: torch.Tensor, width: int, height: int) -> torch.Tensor:
+    """2D covariance (xx, xy, yy) with the low-pass added, for camera-space means."""
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    x, y, z = means_c.unbind(-1)
+    tan_fovx = 0.5 * width / fx
+    tan_fovy = 0.5 * height / fy
+    lim_x_pos = (width - cx) / fx + rules.FOV_CLAMP_MARGIN * tan_fovx
+    lim_x_neg = cx / fx + rules.FOV_CLAMP_MARGIN * tan_fovx
+    lim_y_pos = (height - cy) / fy + rules.FOV_CLAMP_MARGIN * tan_fovy
+    lim_y_neg = cy / fy + rules.FOV_CLAMP_MARGIN * tan_fovy
+    inv_z = 1.0 / z
+    tx = z * torch.minimum(torch.maximum(x * inv_z, -lim_x_neg), lim_x_pos)
+    ty = z * torch.minimum(torch.maximum(y * inv_z, -lim_y_neg), lim_y_pos)
+    zero = torch.zeros_like(z)
+    J = torch.stack([
+        fx * inv_z, zero, -fx * tx * inv_z * inv_z,
+        zero, fy * inv_z, -fy * ty * inv_z * inv_z,
+    ], dim=-1).reshape(-1, 2, 3)
+    M = rot * scales[:, None, :]                      # R S
+    cov3d_w = M @ M.transpose(1, 2)                    # R S S^T R^T (world)
+    cov3d_c = R_wc @ cov3d_w @ R_wc.T                  # camera space
+    cov = J @ cov3d_c @ J.transpose(1, 2)
+    return torch.stack([cov[:, 0, 0] + rules.EPS2D, cov[:, 0, 1], cov[:, 1, 1] + rules.EPS2D], dim=-1)
+
+
+def project_gaussians(field: GaussianField, camera: Camera) -> Projected:
+    """Project every Gaussian; cull by near/far plane, determinant, opacity and screen box."""
+    device, dtype = field.means.device, field.means.dtype
+    R_wc, t_wc, K = camera_tensors(camera, device, dtype)
+    n = field.num
+    W, H = camera.width, camera.height
+
+    # Pass 1 (no grad): which Gaussians survive culling. Culled Gaussians never enter the graph,
+    # so their gradients are exactly zero rather than NaN.
+    with torch.no_grad():
+        means_c = field.means @ R_wc.T + t_wc
+        z = means_c[:, 2]
+        ok = (z >= rules.NEAR_PLANE) & (z <= rules.FAR_PLANE) & torch.isfinite(means_c).all(-1)
+        zs = torch.where(ok, z, torch.ones_like(z))
+        mc = torch.where(ok[:, None], means_c, torch.ones_like(means_c))
+        rot = quat_to_rotmat(normalize_quats(field.quats))
+        cov = _cov2d(mc, rot, field.scales, R_wc, K, W, H)
+        det = cov[:, 0] * cov[:, 2] - cov[:, 1] * cov[:, 1]
+        ok &= torch.isfinite(cov).all(-1) & torch.isfinite(det) & (det > 0)
+        opac = field.opacity
+        ok &= opac >= rules.ALPHA_MIN
+        extend = torch.clamp(torch.sqrt(torch.clamp(2.0 * torch.log(torch.clamp(opac, min=rules.ALPHA_MIN) / rules.ALPHA_MIN), min=0.0)),
+                             max=rules.EXTEND_MAX)
+        rx = torch.ceil(extend * torch.sqrt(torch.clamp(cov[:, 0], min=0.0)))
+        ry = torch.ceil(extend * torch.sqrt(torch.clamp(cov[:, 2], min=0.0)))
+        u = K[0, 0] * mc[:, 0] / zs + K[0, 2]
+        v = K[1, 1] * mc[:, 1] / zs + K[1, 2]
+        # screen box must overlap the image (pixel centres in [0.5, W-0.5])
+        ok &= torch.isfinite(u) & torch.isfinite(v) & torch.isfinite(rx) & torch.isfinite(ry)
+        ok &= (u + rx > 0) & (u - rx < W) & (v + ry > 0) & (v - ry < H)
+        ok &= (rx > 0) & (ry > 0)
+        ids = torch.nonzero(ok).squeeze(1)
+        radii = torch.zeros(n, 2, dtype=torch.int64, device=device)
+        radii[ids, 0] = torch.clamp(rx[ids], max=2**30).to(torch.int64)
+        radii[ids, 1] = torch.clamp(ry[ids], max=2**30).to(torch.int64)
+
+    # Pass 2 (differentiable) on the survivors only.
+    means_c = field.means[ids] @ R_wc.T + t_wc
+    z = means_c[:, 2]
+    u = K[0, 0] * means_c[:, 0] / z + K[0, 2]
+    v = K[1, 1] * means_c[:, 1] / z + K[1, 2]
+    means2d = torch.zeros(n, 2, device=device, dtype=dtype).index_put((ids,), torch.stack([u, v], -1))
+    if means2d.requires_grad:
+        means2d.retain_grad()
+    scales = torch.exp(field.log_scales[ids].clamp(LOG_SCALE_MIN, LOG_SCALE_MAX))
+    rot = quat_to_rotmat(normalize_quats(field.quats[ids]))
+    cov = _cov2d(means_c, rot, scales, R_wc, K, W, H)
+    det = cov[:, 0] * cov[:, 2] - cov[:, 1] * cov[:, 1]
+    conics = torch.stack([cov[:, 2], -cov[:, 1], cov[:, 0]], -1) / det[:, None]
+    return Projected(ids=ids, means2d=means2d, conics=conics, depths=z,
+                     opacities=torch.sigmoid(field.opacity_logits[ids]), radii=radii, cov2d=cov)

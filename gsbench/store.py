@@ -1,0 +1,161 @@
+"""Atomic file writes and the run-folder / results.json contract.
+
+Every file gsbench writes goes through `write_json_atomic` / `write_bytes_atomic` /
+`save_torch_atomic`: the content is written to a temporary file in the same folder, flushed,
+fsync'ed and renamed over the target, so an interrupted process never leaves a half-written file.
+
+Run folder (one per trained run, NerfBaselines-like, one JSON of results per run):
+  config.json       fully resolved config (method, scene, seed, every hyper-parameter, dropped parts)
+  env.json          versions, git sha, host, cpu count, torch threads
+  status.json       {"state": "running"|"done"|"failed"|"nonfinite", "message": str, "step": int, ...}
+  train_log.jsonl   one JSON object per line: {"step", "wall_s", "loss": {...}, "eval": {...}?}
+  checkpoint.pt     GaussianField state + optimiser state + step (atomic)
+  results.json      see RESULTS_SCHEMA below
+
+results.json keys (reports read only these):
+  run_id, method, scene (name), scene_path, seed, grid (dict of axis -> value, may be empty),
+  config (resolved config), providers {"depth": id|None, "masks": id|None, "features": id|None},
+  backend (render backend id), protocol ("3dovs"|"lerf"|None),
+  metric_impl {metric name: implementation id},
+  metrics {name: float|None}          means over test views (None = could not be computed),
+  per_view {name: [float|None, ...]}, view_names [str, ...],
+  skipped {what: reason},             everything not computed and why
+  timings {"train_s", "eval_s", "fps", ...}, memory {"peak_rss_mb", ...},
+  machine {"host", "cpu", "cores", "torch", ...}
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+RESULTS_VERSION = 1
+
+
+def _json_default(o: Any):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return _clean_float(float(o))
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    try:
+        import torch
+        if isinstance(o, torch.Tensor):
+            return o.detach().cpu().tolist()
+    except ImportError:  # pragma: no cover
+        pass
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def _clean_float(x: float):
+    """NaN/inf are not JSON: they become None (a value that could not be computed)."""
+    return x if math.isfinite(x) else None
+
+
+def _clean(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return _clean_float(obj)
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
+    """Write `data` to `path` atomically (temp file in the same folder, fsync, rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> None:
+    write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
+    """JSON with NaN/inf written as null, numpy and torch values converted."""
+    text = json.dumps(_clean(obj), indent=2, default=_json_default, allow_nan=False)
+    write_text_atomic(path, text + "\n")
+
+
+def read_json(path: str | os.PathLike) -> Any:
+    """Read JSON; a missing, truncated or corrupt file is a ValueError naming the file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: file not found") from None
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read ({e.strerror})") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: corrupt or truncated JSON ({e.msg} at line {e.lineno})") from None
+
+
+def append_jsonl(path: str | os.PathLike, obj: Any) -> None:
+    """Append one line; a torn last line (crash mid-write) is skipped by `read_jsonl`."""
+    line = json.dumps(_clean(obj), default=_json_default, allow_nan=False)
+    with open(path, "a", encoding="utf-8") as f:
+        f.write(line + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def read_jsonl(path: str | os.PathLike) -> list[dict]:
+    """All complete lines of a JSONL file; an incomplete trailing line is ignored."""
+    out = []
+    path = Path(path)
+    if not path.exists():
+        return out
+    for line in path.read_text(encoding="utf-8").splitlines():
+        line = line.strip()
+        if not line:
+            continue
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return out
+
+
+def save_torch_atomic(path: str | os.PathLike, obj: Any) -> None:
+    import io
+
+    import torch
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    write_bytes_atomic(path, buf.getvalue())
+
+
+def load_torch(path: str | os.PathLike) -> Any:
+    """Load a checkpoint; a truncated or corrupt file is a ValueError naming the file."""
+    import torch
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: checkpoint not found")
+    try:
+        return torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as e:  # torch raises several types for corrupt files
+        raise ValueError(f"{path}: corrupt or truncated checkpoint ({type(e).__name__}: {e})") from None
