@@ -13,7 +13,8 @@ Run folder (one per trained run, NerfBaselines-like, one JSON of results per run
   results.json      see RESULTS_SCHEMA below
 
 results.json keys (reports read only these):
-  run_id, method, scene (name), scene_path, seed, grid (dict of axis -> value, may be empty),
+  run_id, method, scene (name), scene_path, seed,
+  study (grid name, e.g. "depth_formulation", or None), grid (dict of axis key -> value, may be empty),
   config (resolved config), providers {"depth": id|None, "masks": id|None, "features": id|None},
   backend (render backend id), protocol ("3dovs"|"lerf"|None),
   metric_impl {metric name: implementation id},
@@ -22,6 +23,25 @@ results.json keys (reports read only these):
   skipped {what: reason},             everything not computed and why
   timings {"train_s", "eval_s", "fps", ...}, memory {"peak_rss_mb", ...},
   machine {"host", "cpu", "cores", "torch", ...}
+  status ("done" | "failed" | "nonfinite"), dropped {part: reason} (what the config resolver left out)
+
+Metric names (keys of `metrics` / `per_view`; reports look for exactly these):
+  psnr, ssim, lpips, fps
+  miou_3dovs, mbiou_3dovs, pixel_acc_3dovs            (the configured query mode)
+  miou_3dovs_encode, miou_3dovs_decode, mbiou_3dovs_encode, mbiou_3dovs_decode
+  miou_lerf, loc_acc_lerf, miou_lerf_encode, miou_lerf_decode
+  removal_residual, removal_psnr_outside              (synthetic scenes with removal GT)
+  ordering_adjacent_distance, ordering_adjacent_mask_iou
+Timings: train_s, eval_s, render_ms; memory: peak_rss_mb.
+
+Study names and the grid axis keys they vary (grids in gsbench/grids/, tables in reports):
+  reconstruction     method (x scenes)
+  ordering           priors.ordering
+  depth_formulation  gaussiands.depth_formulation
+  loss_subsets       gaussiands.losses.depth, gaussiands.losses.tv, gaussiands.losses.ds
+  latent_dim         gaussiands.latent_dim (plus a method=vanilla reference cell)
+  lambda_grid        gaussiands.lambdas.depth / .tv / .sem / .ds
+  depth_noise        priors.depth.noise.type, priors.depth.noise.severity
 """
 from __future__ import annotations
 
