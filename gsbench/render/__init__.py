@@ -75,6 +75,10 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
         parts.append(field.features[proj.ids])
     channels = torch.cat(parts, dim=1)
     out, t_final = _rasterizer(name)(proj, channels, camera.width, camera.height)
+    if torch.is_grad_enabled() and channels.requires_grad and not out.requires_grad:
+        # nothing visible: keep the outputs attached to the graph (zero gradients, not an error)
+        zero = channels.sum() * 0.0
+        out, t_final = out + zero, t_final + zero
     rgb = out[..., :3]
     if background is not None:
         bg = torch.as_tensor(background, device=device, dtype=dtype).reshape(1, 1, 3)
