@@ -50,6 +50,12 @@ class Scene:
     queries: list[str] = field(default_factory=list)      # LERF-OVS text queries of the scene
     image_loader: Optional[Callable[[int], np.ndarray]] = None
     meta: dict = field(default_factory=dict)
+    # added by the datasets reader (defaults keep older constructors valid)
+    class_masks_loader: Optional[Callable[[int], Optional[dict]]] = None  # 3D-OVS: {class: bool HxW} or None
+    semantic_view_ids: list[int] = field(default_factory=list)  # views with 3D-OVS class GT
+    label_view_ids: list[int] = field(default_factory=list)     # views with a LERF label file
+    removable_instances: list[int] = field(default_factory=list)  # instance ids with removal GT
+    instance_names: dict = field(default_factory=dict)          # instance id -> name (e.g. "mug")
 
     # ------------------------------------------------------------------ parts
     @property
@@ -107,4 +113,9 @@ class Scene:
         return None if self.labels_loader is None else self.labels_loader(i)
 
     def removed_image(self, i: int, instance_id: int) -> Optional[np.ndarray]:
+        """float32 H x W x 3 render of view i without instance `instance_id` (synthetic), or None."""
         return None if self.removal_loader is None else self.removal_loader(i, instance_id)
+
+    def gt_class_masks(self, i: int) -> Optional[dict]:
+        """3D-OVS per-class bool masks {class name: H x W} of view i (overlaps kept), or None."""
+        return None if self.class_masks_loader is None else self.class_masks_loader(i)

@@ -5,7 +5,8 @@ Parameters are raw (unconstrained) tensors so optimisers act on them directly:
   opacity = sigmoid(opacity_logits)
   rotation = normalised quaternion (w, x, y, z); a zero quaternion is the identity rotation.
 Colours are RGB (N x 3) composited as given, or SH coefficients (N x K x 3, K in 1, 4, 9, 16)
-evaluated for a view direction. Features are N x d latents composited as given.
+evaluated for the direction camera centre -> mean, plus 0.5, clamped at 0 (as 3DGS and gsplat).
+Features are N x d latents composited as given.
 """
 from __future__ import annotations
 
@@ -93,7 +94,8 @@ class GaussianField:
         else:
             d = self.means - camera_center.to(self.means)
             dirs = d / torch.sqrt((d * d).sum(-1, keepdim=True) + 1e-20)
-        return eval_sh(self.colors, dirs) + 0.5
+        # 3DGS / gsplat convention: SH value + 0.5, clamped at 0 (no negative light)
+        return torch.clamp_min(eval_sh(self.colors, dirs) + 0.5, 0.0)
 
     # ------------------------------------------------------------------ utilities
     def tensors(self) -> dict[str, Optional[torch.Tensor]]:

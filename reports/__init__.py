@@ -1,0 +1,17 @@
+"""gsbench.reports: tables (Markdown, LaTeX, HTML), plots and a static HTML page built only from
+the collected results (gsbench.collect) and the runs' train_log.jsonl.
+
+Entry point: `build_report(runs_dir_or_collected_file, out_dir) -> ReportSummary`.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["build_report", "ReportSummary"]
+
+
+def __getattr__(name: str) -> Any:  # lazy: importing the package must not import matplotlib
+    if name in ("build_report", "ReportSummary"):
+        from gsbench.reports import build
+        return getattr(build, name)
+    raise AttributeError(name)

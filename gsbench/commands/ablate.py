@@ -1,14 +1,75 @@
-"""`gsbench ablate`."""
+"""`gsbench ablate --grid GRID --out RUNS_DIR`: run an ablation / noise grid.
+
+Re-running skips finished cells, resumes interrupted ones (stale `running` cells whose process is
+gone) and leaves failed cells alone unless `--retry-failed`. `--status` prints progress only.
+"""
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
-from gsbench.errors import NotBuiltError
+from gsbench.errors import InputError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("--grid", help="a shipped grid name (see --list) or a grid YAML file")
+    parser.add_argument("--out", type=Path, help="RUNS_DIR: one run folder per cell, shared scenes and priors cache")
+    parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                        help="override config keys in every cell (e.g. train.iterations=30); may not be a grid axis")
+    parser.add_argument("--executor", choices=["local", "submitit"], default="local")
+    parser.add_argument("--jobs", type=int, default=1, help="local: worker processes (one cell each); "
+                        "submitit/slurm: max concurrently running array tasks")
+    parser.add_argument("--cluster", choices=["slurm", "local", "debug"], default="slurm",
+                        help="submitit backend (local = subprocesses on this machine)")
+    parser.add_argument("--slurm-partition", default=None)
+    parser.add_argument("--timeout-min", type=int, default=None, help="submitit: job time limit in minutes")
+    parser.add_argument("--cpus-per-task", type=int, default=None)
+    parser.add_argument("--gpus-per-node", type=int, default=None)
+    parser.add_argument("--retry-failed", action="store_true", help="re-run cells that failed before")
+    parser.add_argument("--status", action="store_true", help="print the state of every cell and exit")
+    parser.add_argument("--dry-run", action="store_true", help="list the cells (and their run ids) without running")
+    parser.add_argument("--list", action="store_true", help="list the shipped grids")
+    parser.add_argument("--no-progress", action="store_true")
 
 
 def run(args: argparse.Namespace) -> int:
-    raise NotBuiltError("`gsbench ablate` is not implemented in this build")
+    from gsbench import grids
+    if args.list:
+        for name in grids.shipped_grids():
+            g = grids.load_grid(name)
+            print(f"{name:28s} study={g.study:18s} cells={len(g.cells()):4d}  {g.description}")
+        return 0
+    if args.out is None:
+        raise InputError("--out RUNS_DIR is required")
+    extra = grids.parse_set(args.set)
+    if args.status:
+        grid = grids.load_grid(args.grid, extra_set=extra) if args.grid else None
+        if not args.out.is_dir():
+            raise InputError(f"{args.out}: runs folder not found")
+        rows = grids.status_rows(args.out, grid)
+        print(grids.format_status(rows))
+        return 0
+    if not args.grid:
+        raise InputError("--grid is required (a shipped name or a YAML file; --list shows the shipped ones)")
+    grid = grids.load_grid(args.grid, extra_set=extra)
+    if args.dry_run:
+        for c in grid.cells():
+            print(f"{c.method:10s} {c.scene.label:24s} seed={c.seed} " + " ".join(f"{k}={v}" for k, v in c.axes.items()))
+        print(f"{len(grid.cells())} cells")
+        return 0
+    from gsbench.executors import make_executor
+    slurm = {"slurm_partition": args.slurm_partition, "timeout_min": args.timeout_min,
+             "cpus_per_task": args.cpus_per_task, "gpus_per_node": args.gpus_per_node}
+    if args.cluster != "slurm":
+        slurm = {k: v for k, v in slurm.items() if not k.startswith("slurm_")}
+    executor = make_executor(args.executor, jobs=args.jobs, folder=args.out / ".submitit", cluster=args.cluster,
+                             progress=not args.no_progress, **slurm)
+    report = grids.run_grid(grid, args.out, executor, retry_failed=args.retry_failed)
+    rows = grids.status_rows(args.out, grid)
+    print(grids.format_status(rows))
+    failed = [r for r in report.results if r and r.get("state") != "done"]
+    for r in failed:
+        print(f"failed: {r['run_dir']}: {r.get('error')}", file=sys.stderr)
+    not_done = [r for r in rows if r["state"] != "done"]
+    return 1 if not_done else 0

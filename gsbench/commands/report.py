@@ -1,14 +1,25 @@
-"""`gsbench report`."""
+"""`gsbench report RUNS_DIR --out REPORT_DIR`: Markdown and LaTeX tables, PNG plots and a static
+index.html, built only from the collected results (and the runs' train_log.jsonl for time curves)."""
 from __future__ import annotations
 
 import argparse
-
-from gsbench.errors import NotBuiltError
+import sys
+from pathlib import Path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("runs_dir", type=Path,
+                        help="runs folder (collected now), or a collected.parquet / collected.csv file")
+    parser.add_argument("--out", type=Path, required=True, help="report folder (index.html, tables/, plots/)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
-    raise NotBuiltError("`gsbench report` is not implemented in this build")
+    from gsbench.reports.build import build_report
+
+    summary = build_report(args.runs_dir, args.out, progress=not args.no_progress)
+    for n in summary.notes:
+        print(f"gsbench report: note: {n}", file=sys.stderr)
+    print(f"{len(summary.tables)} tables ({', '.join(summary.tables) or 'none'}), {len(summary.plots)} plots")
+    print(f"Report: {summary.index}")
+    return 0

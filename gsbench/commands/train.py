@@ -1,14 +1,32 @@
-"""`gsbench train`."""
+"""`gsbench train --method M --scene PATH [--preset P] [--set key=value ...] --out RUN_DIR`."""
 from __future__ import annotations
 
 import argparse
-
-from gsbench.errors import NotBuiltError
+from pathlib import Path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("--method", required=True, choices=["gaussiands", "vanilla", "twostage"],
+                        help="method to train")
+    parser.add_argument("--scene", required=True, help="scene folder (any layout gsbench.datasets reads)")
+    parser.add_argument("--preset", default=None, help="config preset: cpu-small, paper, or a .yaml path")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                        help="override one config key, e.g. --set train.iterations=300 (repeatable)")
+    parser.add_argument("--out", required=True, help="run folder to write (resumed if it holds a checkpoint)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def run(args: argparse.Namespace) -> int:
-    raise NotBuiltError("`gsbench train` is not implemented in this build")
+    from gsbench.config import load_config
+    from gsbench.runs import train_run
+    from gsbench.store import read_json
+
+    cfg = load_config(args.method, args.preset, args.overrides)
+    out = train_run(cfg, Path(args.scene), Path(args.out), progress=not args.no_progress)
+    s = read_json(out / "train_summary.json")
+    ev = s.get("last_eval") or {}
+    psnr = ev.get("psnr")
+    print(f"gsbench train: {s['status']} {out} method={s['method']} iterations={s['iterations']} "
+          f"gaussians={s['n_gaussians']} train_s={s['train_s']:.1f} peak_rss_mb={s['peak_rss_mb']:.0f} "
+          f"backend={s['backend']}" + (f" test_psnr={psnr:.2f}" if psnr is not None else ""))
+    return 0

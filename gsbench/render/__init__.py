@@ -2,6 +2,7 @@
 
     out = render(field, camera, backend="auto", background=None)
     out.rgb (H,W,3), out.depth (H,W), out.features (H,W,d) or None, out.alpha (H,W)
+    out.info: n_gaussians, n_visible (survived culling), width, height, dtype, device
 
 depth is camera-space z composited like colour (paper Eq. 4: sum_k T_k alpha_k z_k), not divided
 by alpha. Background is added to rgb only: rgb + (1 - alpha) * background.
@@ -69,7 +70,7 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
         torch.set_flush_denormal(True)
     proj: Projected = project_gaussians(field, camera)
     cam_center = torch.as_tensor(camera.center, device=device, dtype=dtype)
-    rgb_g = field.rgb(cam_center)[proj.ids]
+    rgb_g = field.subset(proj.ids).rgb(cam_center)   # colours of visible Gaussians only (NaN-free grads)
     parts = [rgb_g, proj.depths[:, None]]
     if field.features is not None:
         parts.append(field.features[proj.ids])
@@ -77,7 +78,7 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
     out, t_final = _rasterizer(name)(proj, channels, camera.width, camera.height)
     if torch.is_grad_enabled() and channels.requires_grad and not out.requires_grad:
         # nothing visible: keep the outputs attached to the graph (zero gradients, not an error)
-        zero = channels.sum() * 0.0
+        zero = channels[:0].sum()     # an exact 0 even if some channel is inf
         out, t_final = out + zero, t_final + zero
     rgb = out[..., :3]
     if background is not None:
@@ -86,4 +87,6 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
     feats = out[..., 4:] if field.features is not None else None
     return RenderOutput(rgb=rgb, depth=out[..., 3], features=feats, alpha=1.0 - t_final, backend=name,
                         means2d=proj.means2d, radii=proj.radii,
-                        info={"n_visible": int(proj.ids.numel())})
+                        info={"n_gaussians": field.num, "n_visible": int(proj.ids.numel()),
+                              "width": camera.width, "height": camera.height,
+                              "dtype": str(dtype).replace("torch.", ""), "device": str(device)})

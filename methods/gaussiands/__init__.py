@@ -1,0 +1,115 @@
+"""GaussianDS: joint optimisation from scratch of appearance, scale-shift-aligned depth and compact
+semantic latents (paper Sec. III-IV; decisions in shared/GAUSSIANDS.md).
+
+    L = L_rec + 0.01 L_depth + 1.5 L_tv + 5.0 L_sem + 1.0 L_ds      (config gaussiands.lambdas)
+
+Inputs come from gsbench.priors: pose-aware pseudo-video order (priors.ordering), propagated masks,
+512-d mask features (compressed by the frozen autoencoder to d = gaussiands.latent_dim) and the depth
+prior. Terms the resolved config switched off (gaussiands.losses.*) are neither computed nor fed.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from gsbench.methods.base import Method, load_views, scene_init
+from gsbench.methods.common import fit_priors, resolve_render_backend, run_trainer, uses
+from gsbench.methods.losses import depth_edges, depth_loss, ds_loss, reconstruction_loss, sem_loss, tv_loss
+from gsbench.methods.semantic import build_targets, fit_autoencoder
+from gsbench.methods.trainer import LossResult
+
+
+class GaussianDS(Method):
+    name = "gaussiands"
+
+    def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
+        run_dir = Path(run_dir)
+        self.config = config
+        self._backend = resolve_render_backend(config)
+        g = config["gaussiands"]
+        use = uses(config)
+        views, (W, H) = load_views(scene, config)
+        train_ids = sorted(views.cameras)
+        pri = fit_priors(scene, config, run_dir, train_ids, (W, H), need_depth=use["depth_prior"],
+                         need_sem=use["semantics"], per_frame=False, progress=progress)
+        self.providers = dict(pri.providers)
+        self.info["priors_stats"] = dict(pri.stats)
+        self.info["priors_skipped"] = dict(pri.skipped)
+
+        from gsbench.methods.trainer import load_checkpoint_if_any
+        ckpt = load_checkpoint_if_any(run_dir)
+        # ---- semantics: autoencoder (trained once, frozen; restored on resume) and per-pixel targets
+        targets = None
+        d = int(g["latent_dim"]) if use["semantics"] else 0
+        if use["semantics"]:
+            if pri.masks is None or pri.mask_features is None:
+                raise ValueError(f"gaussiands: semantic losses are on but the priors gave no masks/features ({pri.skipped})")
+            ae_state = (ckpt or {}).get("extra", {}).get("autoencoder")
+            ae, ae_stats = fit_autoencoder(pri.mask_features, g["autoencoder"], d, int(config["seed"]))
+            if ae_state is not None:
+                ae.load_state_dict(ae_state)
+            self.autoencoder = ae
+            self.info["autoencoder"] = ae_stats
+            targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids})
+        # ---- depth prior and its edges E_d (invariant to the per-iteration affine alignment, see losses.py)
+        depth = pri.depth if use["depth_prior"] else None
+        edges = {}
+        if use["depth_prior"] and depth is None:
+            raise ValueError(f"gaussiands: depth terms are on but the priors gave no depth ({pri.skipped})")
+        if g["losses"]["ds"] and depth is not None:
+            e = g["edges"]
+            for v in train_ids:
+                edges[v] = torch.as_tensor(depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"], int(e["dilate"])))
+            self.info["edge_fraction"] = float(np.mean([float(x.float().mean()) for x in edges.values()])) if edges else 0.0
+
+        lam = g["lambdas"]
+        on = g["losses"]
+        lam_dssim = float(config["train"]["lambda_dssim"])
+        form = g["depth_formulation"]
+        min_valid = int(g["min_valid_pixels"])
+        tv_eps = float(g["tv_eps"])
+
+        def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
+            rec = reconstruction_loss(out.rgb, gt, lam_dssim)
+            total = rec
+            terms = {"rec": float(rec.detach())}
+            skipped = {}
+            if on["depth"] and depth is not None:
+                p = depth[vid]
+                dt = depth_loss(form, out.depth, p.values, p.valid, p.kind, min_valid)
+                if dt.loss is None:
+                    skipped["depth"] = 1
+                else:
+                    total = total + float(lam["depth"]) * dt.loss
+                    terms["depth"] = float(dt.loss.detach())
+            if on["tv"]:
+                tv = tv_loss(out.depth, tv_eps)
+                total = total + float(lam["tv"]) * tv
+                terms["tv"] = float(tv.detach())
+            if targets is not None and out.features is not None:
+                S, has = targets.latents[vid], targets.has_target[vid]
+                if on["sem"]:
+                    ls = sem_loss(out.features, S, has)
+                    if ls is None:
+                        skipped["sem"] = 1
+                    else:
+                        total = total + float(lam["sem"]) * ls
+                        terms["sem"] = float(ls.detach())
+                if on["ds"] and vid in edges:
+                    ld = ds_loss(out.features, S, has, edges[vid])
+                    if ld is None:
+                        skipped["ds"] = 1
+                    else:
+                        total = total + float(lam["ds"]) * ld
+                        terms["ds"] = float(ld.detach())
+            terms["total"] = float(total.detach())
+            return LossResult(total, terms, skipped)
+
+        extra = (lambda: {"autoencoder": self.autoencoder.state_dict()}) if self.autoencoder is not None else None
+        field0, how = scene_init(scene, config, d)
+        self.info["init"] = how
+        self.field = run_trainer(config, views, scene, field0, run_dir, loss_fn, phase="main",
+                                 backend=self._backend, progress=progress, resume=ckpt, extra_state=extra)
+        self.info["n_gaussians"] = self.field.num

@@ -1,0 +1,133 @@
+"""Image files: reading as float RGB in [0, 1], header-only size checks, atomic PNG / NPY writes.
+
+Every reader goes through these so that a missing or unreadable file is one InputError naming it.
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from gsbench.errors import InputError
+from gsbench.store import write_bytes_atomic
+
+IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".JPG", ".JPEG", ".PNG", ".bmp", ".tif", ".tiff", ".exr", ".webp")
+
+
+def list_images(folder: Path) -> list[Path]:
+    """Image files of a folder, sorted by name (the index order of every layout)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"{folder}: image folder not found")
+    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix in IMAGE_EXTS and not p.name.startswith("."))
+    if not files:
+        raise InputError(f"{folder}: no image files")
+    return files
+
+
+def image_size(path: Path) -> tuple[int, int]:
+    """(width, height) from the file header, without decoding the pixels."""
+    from PIL import Image
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: image file not found")
+    try:
+        with Image.open(path) as im:
+            return int(im.size[0]), int(im.size[1])
+    except Exception as e:  # PIL raises several types for unreadable files
+        raise InputError(f"{path}: cannot read image header ({type(e).__name__}: {e})") from None
+
+
+def _decode(path: Path, flags: int) -> np.ndarray:
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: image file not found")
+    data = np.fromfile(str(path), dtype=np.uint8)
+    img = cv2.imdecode(data, flags) if data.size else None
+    if img is None:
+        raise InputError(f"{path}: cannot decode image (corrupt or unsupported format)")
+    return img
+
+
+def _to_unit(img: np.ndarray, path: Path) -> np.ndarray:
+    if img.dtype == np.uint8:
+        return img.astype(np.float32) / 255.0
+    if img.dtype == np.uint16:
+        return img.astype(np.float32) / 65535.0
+    if img.dtype in (np.float32, np.float64):
+        return np.clip(img.astype(np.float32), 0.0, 1.0)
+    raise InputError(f"{path}: unsupported image dtype {img.dtype}")
+
+
+def read_rgb(path: Path, expect_size: tuple[int, int] | None = None, background: float = 0.0) -> np.ndarray:
+    """float32 H x W x 3 in [0, 1]. RGBA is composited over `background` (a grey level).
+
+    `expect_size` = (width, height) of the camera; a different size is an InputError.
+    """
+    img = _decode(path, cv2.IMREAD_UNCHANGED)
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+        img = _to_unit(img, path)
+    elif img.shape[2] == 4:
+        f = _to_unit(img, path)
+        rgb = f[:, :, 2::-1]
+        a = f[:, :, 3:4]
+        img = rgb * a + background * (1.0 - a)
+    elif img.shape[2] == 3:
+        img = _to_unit(img[:, :, ::-1], path)
+    else:
+        raise InputError(f"{path}: unsupported channel count {img.shape[2]}")
+    img = np.ascontiguousarray(img, dtype=np.float32)
+    if expect_size is not None and (img.shape[1], img.shape[0]) != tuple(expect_size):
+        raise InputError(f"{path}: image is {img.shape[1]}x{img.shape[0]}, camera says {expect_size[0]}x{expect_size[1]}")
+    return img
+
+
+def read_gray(path: Path, expect_size: tuple[int, int] | None = None) -> np.ndarray:
+    """Single-channel image as stored (uint8 / uint16), first channel of colour files."""
+    img = _decode(path, cv2.IMREAD_UNCHANGED)
+    if img.ndim == 3:
+        img = img[:, :, 0] if img.shape[2] != 4 else img[:, :, 0]
+    if expect_size is not None and (img.shape[1], img.shape[0]) != tuple(expect_size):
+        raise InputError(f"{path}: mask is {img.shape[1]}x{img.shape[0]}, image is {expect_size[0]}x{expect_size[1]}")
+    return img
+
+
+def _put(path: Path, data: bytes, atomic: bool) -> None:
+    if atomic:
+        write_bytes_atomic(path, data)
+    else:  # inside a temporary folder that is renamed into place as a whole
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_bytes(data)
+
+
+def write_png(path: Path, img: np.ndarray, atomic: bool = True) -> None:
+    """PNG write. float RGB in [0, 1] -> 8-bit; uint8 / uint16 arrays written as they are."""
+    a = np.asarray(img)
+    if a.dtype in (np.float32, np.float64):
+        a = np.clip(np.round(a * 255.0), 0, 255).astype(np.uint8)
+    if a.ndim == 3:
+        a = a[:, :, ::-1]  # RGB -> BGR for OpenCV
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(a))
+    if not ok:
+        raise OSError(f"{path}: PNG encoding failed")
+    _put(path, buf.tobytes(), atomic)
+
+
+def write_npy(path: Path, arr: np.ndarray, atomic: bool = True) -> None:
+    buf = io.BytesIO()
+    np.save(buf, np.asarray(arr), allow_pickle=False)
+    _put(path, buf.getvalue(), atomic)
+
+
+def read_npy(path: Path) -> np.ndarray:
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: file not found")
+    try:
+        return np.load(path, allow_pickle=False)
+    except Exception as e:
+        raise InputError(f"{path}: corrupt or unreadable .npy ({type(e).__name__}: {e})") from None

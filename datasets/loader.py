@@ -1,0 +1,307 @@
+"""`load_scene`: detect the layout of a scene folder and build a `Scene` in the OpenCV convention.
+
+Layouts (`layout=`): colmap, llff, nerf, 3dovs, lerf, 3dovs+lerf (alias both), kaolin, auto.
+Cameras come from, in order of preference:
+  colmap -> sparse/0 (or sparse/ or the folder); llff -> poses_bounds.npy; nerf -> transforms*.json;
+  3dovs -> poses_bounds.npy (the 3D-OVS protocol), else COLMAP; lerf / both -> COLMAP, else
+  transforms.json, else poses_bounds.npy. Sparse points come from a COLMAP model whenever one exists.
+A gsbench synthetic scene (`gsbench_scene.json`) adds GT depth, instances, removal renders and its
+explicit split to whichever layout is read. Split: explicit lists when the layout has them, else the
+LLFF hold-out (index % 8 == 0 -> test).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from gsbench.errors import InputError
+from gsbench.scene import Camera
+
+from . import colmap as colmap_io
+from . import kaolin as kaolin_io
+from . import llff as llff_io
+from . import nerf as nerf_io
+from . import ovs
+from .base import Scene
+from .imageio import image_size, list_images, read_gray, read_npy, read_rgb
+
+LAYOUTS = ("auto", "colmap", "llff", "nerf", "3dovs", "lerf", "3dovs+lerf", "both", "kaolin")
+SYNTHETIC_META = "gsbench_scene.json"
+LLFF_HOLD = 8
+
+
+# ------------------------------------------------------------------------------------ detection
+def detect_layout(root: Path) -> str:
+    root = Path(root)
+    if kaolin_io.is_kaolin(root):
+        return "kaolin"
+    has_ovs = (root / "segmentations" / "classes.txt").is_file()
+    has_lerf = ovs.find_label_dir(root) is not None
+    if has_ovs and has_lerf:
+        return "3dovs+lerf"
+    if has_ovs:
+        return "3dovs"
+    if has_lerf:
+        return "lerf"
+    if colmap_io.find_model_dir(root) is not None:
+        return "colmap"
+    if (root / "poses_bounds.npy").is_file():
+        return "llff"
+    if (root / "transforms.json").is_file() or (root / "transforms_train.json").is_file():
+        return "nerf"
+    raise InputError(f"{root}: unknown scene layout (looked for views/*_rgb.png, segmentations/classes.txt, "
+                     "label/<scene>/frame_*.json, sparse/0, poses_bounds.npy, transforms.json)")
+
+
+def llff_split(n: int, hold: int = LLFF_HOLD) -> tuple[list[int], list[int]]:
+    """LLFF / 3DGS hold-out: every `hold`-th view (index % hold == 0) is a test view."""
+    test = [i for i in range(n) if i % hold == 0] if n > 1 else []
+    return [i for i in range(n) if i not in set(test)], test
+
+
+def camera_extent(cameras: list[Camera]) -> float:
+    """3DGS scene radius: 1.1 x the largest distance of a camera centre from their mean (0 if one camera)."""
+    c = np.array([cam.center for cam in cameras])
+    return float(1.1 * np.max(np.linalg.norm(c - c.mean(0), axis=1))) if len(c) else 0.0
+
+
+# ------------------------------------------------------------------------------------ cameras
+def _from_colmap(root: Path):
+    mdir = colmap_io.find_model_dir(root)
+    if mdir is None:
+        raise InputError(f"{root}: no COLMAP model (sparse/0/cameras.bin|txt)")
+    cams, points, colors, meta = colmap_io.read_colmap(mdir)
+    img_dir = root / "images"
+    names = sorted(cams)
+    paths = []
+    for n in names:
+        p = img_dir / n
+        if not p.is_file():
+            raise InputError(f"{p}: image listed in the COLMAP model {mdir} is missing")
+        w, h = image_size(p)
+        if (w, h) != (cams[n].width, cams[n].height):
+            raise InputError(f"{p}: image is {w}x{h}, COLMAP camera says {cams[n].width}x{cams[n].height}")
+        paths.append(p)
+    if img_dir.is_dir():
+        extra = len(list_images(img_dir)) - len(names)
+        if extra > 0:
+            meta["images_without_pose"] = extra
+    meta["poses_from"] = str(mdir)
+    return [cams[n] for n in names], paths, points, colors, meta
+
+
+def _from_llff(root: Path):
+    paths = list_images(root / "images")
+    sizes = [image_size(p) for p in paths]
+    cams, bounds = llff_io.read_poses_bounds(root / "poses_bounds.npy", sizes, [p.name for p in paths])
+    return cams, paths, {"poses_from": str(root / "poses_bounds.npy"), "near": float(bounds[:, 0].min()),
+                         "far": float(bounds[:, 1].max())}
+
+
+def _points_if_any(root: Path):
+    mdir = colmap_io.find_model_dir(root)
+    if mdir is None:
+        return None, None
+    _, points, colors, _ = colmap_io.read_colmap(mdir)
+    return points, colors
+
+
+def _base_scene(root: Path, layout: str) -> Scene:
+    points = colors = None
+    train = test = None
+    if layout == "colmap":
+        cams, paths, points, colors, meta = _from_colmap(root)
+    elif layout == "llff":
+        cams, paths, meta = _from_llff(root)
+    elif layout == "nerf":
+        cams, paths, train, test, meta = nerf_io.read_transforms(root)
+    elif layout == "3dovs":
+        if (root / "poses_bounds.npy").is_file():
+            cams, paths, meta = _from_llff(root)
+            points, colors = _points_if_any(root)
+        else:
+            cams, paths, points, colors, meta = _from_colmap(root)
+    else:  # lerf, 3dovs+lerf
+        if colmap_io.find_model_dir(root) is not None:
+            cams, paths, points, colors, meta = _from_colmap(root)
+        elif (root / "transforms.json").is_file():
+            cams, paths, train, test, meta = nerf_io.read_transforms(root)
+        elif (root / "poses_bounds.npy").is_file():
+            cams, paths, meta = _from_llff(root)
+        else:
+            raise InputError(f"{root}: no poses (sparse/0, transforms.json or poses_bounds.npy)")
+    if train is None:
+        train, test = llff_split(len(cams))
+        meta["split"] = f"llff-hold-{LLFF_HOLD}"
+    loader = _ImageLoader(cams, paths)
+    return Scene(name=root.name, path=str(root), layout=layout, cameras=cams, train_ids=train, test_ids=test,
+                 image_paths=[str(p) for p in paths], points=points, point_colors=colors,
+                 extent=camera_extent(cams), image_loader=loader, meta=meta)
+
+
+class _ImageLoader:
+    """Lazy image reads with the size check against the camera (picklable, for worker processes)."""
+
+    def __init__(self, cams: list[Camera], paths: list[Path]):
+        self.sizes = [(c.width, c.height) for c in cams]
+        self.paths = [Path(p) for p in paths]
+
+    def __call__(self, i: int) -> np.ndarray:
+        return read_rgb(self.paths[i], self.sizes[i])
+
+
+# ------------------------------------------------------------------------------------ optional parts
+def _attach_3dovs(scene: Scene, root: Path) -> None:
+    seg_dir = root / "segmentations"
+    names = ovs.read_classes(seg_dir)
+    files = ovs.scan_segmentations(seg_dir, names, len(scene.cameras))
+    sizes = [(c.width, c.height) for c in scene.cameras]
+
+    def masks(i: int):
+        return ovs.read_class_masks(files[i], names, sizes[i]) if i in files else None
+
+    def classes(i: int):
+        m = masks(i)
+        return None if m is None else ovs.masks_to_class_map(m, names)
+
+    scene.class_names = names
+    scene.class_masks_loader = masks
+    scene.classes_loader = classes
+    scene.semantic_view_ids = sorted(files)
+
+
+def _attach_lerf(scene: Scene, root: Path) -> None:
+    ldir = ovs.find_label_dir(root)
+    if ldir is None:
+        raise InputError(f"{root}: no LERF-OVS labels (label/{root.name}/frame_XXXXX.json)")
+    files = ovs.label_files(ldir, len(scene.cameras))
+    queries: set[str] = set()
+    parsed = {}
+    for i, f in files.items():
+        info, objs = ovs.read_lerf_label(f)
+        cam = scene.cameras[i]
+        w, h = info.get("width"), info.get("height")
+        if w is not None and h is not None and (int(w), int(h)) != (cam.width, cam.height):
+            sx, sy = cam.width / float(w), cam.height / float(h)
+            if abs(sx - sy) > 0.01 * max(sx, sy):
+                raise InputError(f"{f}: label size {w}x{h} has another aspect ratio than image {cam.name} "
+                                 f"({cam.width}x{cam.height})")
+            objs = ovs.scale_labels(objs, sx, sy)
+            scene.meta["labels_rescaled"] = True
+        parsed[i] = objs
+        queries.update(o.category for o in objs)
+    scene.labels_loader = parsed.get
+    scene.label_view_ids = sorted(parsed)
+    scene.queries = sorted(queries)
+    scene.meta["label_dir"] = str(ldir)
+
+
+def _attach_synthetic(scene: Scene, root: Path) -> None:
+    mp = root / SYNTHETIC_META
+    meta = nerf_io.read_json_input(mp)
+    names = [Path(p).name for p in scene.image_paths]
+    if meta.get("image_names") != names:
+        raise InputError(f"{mp}: image_names do not match the images of the scene ({len(names)} images)")
+    n = len(names)
+    train, test = meta.get("train_ids"), meta.get("test_ids")
+    if not (isinstance(train, list) and isinstance(test, list) and all(0 <= int(i) < n for i in train + test)):
+        raise InputError(f"{mp}: train_ids / test_ids missing or out of range")
+    scene.train_ids, scene.test_ids = [int(i) for i in train], [int(i) for i in test]
+    scene.meta["split"] = "explicit (gsbench_scene.json)"
+    stems = [Path(x).stem for x in names]
+    sizes = [(c.width, c.height) for c in scene.cameras]
+    gt = root / meta.get("gt_dir", "gt")
+
+    def depth(i: int) -> np.ndarray:
+        p = gt / "depth" / f"{stems[i]}.npy"
+        d = read_npy(p)
+        if d.shape != (sizes[i][1], sizes[i][0]):
+            raise InputError(f"{p}: depth is {d.shape}, image is {sizes[i][1]}x{sizes[i][0]}")
+        return d.astype(np.float32)
+
+    def instances(i: int) -> np.ndarray:
+        return read_gray(gt / "instances" / f"{stems[i]}.png", sizes[i]).astype(np.int32) - 1
+
+    removable = [int(k) for k in meta.get("removable_instances", [])]
+
+    def removal(i: int, inst: int):
+        if int(inst) not in removable:
+            return None
+        return read_rgb(gt / "removal" / stems[i] / f"{int(inst):03d}.png", sizes[i])
+
+    scene.depth_loader = depth
+    scene.instances_loader = instances
+    scene.removal_loader = removal
+    scene.removable_instances = removable
+    scene.instance_classes = {int(k): v for k, v in meta.get("instance_classes", {}).items()}
+    scene.instance_names = {int(k): v for k, v in meta.get("instance_names", {}).items()}
+    if not scene.class_names:
+        scene.class_names = list(meta.get("class_names", []))  # index space of instance_classes
+    scene.meta["synthetic"] = meta.get("generator", {})
+    scene.meta["depth_format"] = "float32 .npy, camera-space z, 0 where no surface"
+
+
+def _kaolin_scene(root: Path) -> Scene:
+    cams, rgbs, sems = kaolin_io.read_kaolin(root)
+    sizes = [(c.width, c.height) for c in cams]
+
+    def masks(i: int):
+        m = read_gray(sems[i], sizes[i])
+        return {"background": m == 0, "clock": m == 255}
+
+    def classes(i: int):
+        m = read_gray(sems[i], sizes[i])
+        out = np.full(m.shape, -1, np.int32)
+        out[m == 0] = 0
+        out[m == 255] = 1
+        return out
+
+    train, test = llff_split(len(cams))
+    return Scene(name=root.name, path=str(root), layout="kaolin", cameras=cams, train_ids=train, test_ids=test,
+                 image_paths=[str(p) for p in rgbs], class_names=["background", "clock"], extent=camera_extent(cams),
+                 classes_loader=classes, class_masks_loader=masks, semantic_view_ids=list(range(len(cams))),
+                 image_loader=_ImageLoader(cams, rgbs),
+                 meta={"split": f"llff-hold-{LLFF_HOLD}", "poses_from": "views/*_metadata.json (USD tf_mat)",
+                       "semantic_paths": [str(p) for p in sems]})
+
+
+# ------------------------------------------------------------------------------------ public
+def load_scene(path: str | Path, layout: str = "auto") -> Scene:
+    """Read a scene folder into a `Scene` (OpenCV cameras, lazy images, split, optional GT parts)."""
+    root = Path(path)
+    if not root.is_dir():
+        raise InputError(f"{root}: scene folder not found")
+    if layout not in LAYOUTS:
+        raise InputError(f"unknown layout {layout!r}; choose one of {', '.join(LAYOUTS)}")
+    if layout == "both":
+        layout = "3dovs+lerf"
+    if layout == "auto":
+        layout = detect_layout(root)
+    if layout == "kaolin":
+        return _kaolin_scene(root)
+    scene = _base_scene(root, layout)
+    if layout in ("3dovs", "3dovs+lerf"):
+        _attach_3dovs(scene, root)
+    if layout in ("lerf", "3dovs+lerf"):
+        _attach_lerf(scene, root)
+    if (root / SYNTHETIC_META).is_file():
+        _attach_synthetic(scene, root)
+    if scene.extent <= 1e-9:
+        raise InputError(f"{root}: all cameras share one centre; the scene extent is undefined")
+    return scene
+
+
+def scene_fingerprint(path: str | Path, layout: str = "auto") -> str:
+    """sha256 of what a run depends on: layout, cameras, split, classes, queries and the image bytes."""
+    scene = load_scene(path, layout)
+    h = hashlib.sha256()
+    head = {"layout": scene.layout, "cameras": [c.to_dict() for c in scene.cameras], "train": scene.train_ids,
+            "test": scene.test_ids, "classes": scene.class_names, "queries": scene.queries}
+    h.update(json.dumps(head, sort_keys=True).encode())
+    for p in scene.image_paths:
+        h.update(Path(p).name.encode())
+        h.update(hashlib.sha256(Path(p).read_bytes()).digest())
+    return h.hexdigest()

@@ -1,0 +1,379 @@
+"""Gather every results.json under a runs folder into one long table (one row per run and metric).
+
+Why a long table: ablation grids vary different axes, and a report needs to slice runs by any of
+them; one row per (run, metric) with one `axis.<key>` column per grid axis is the simplest shape
+that pandas can pivot into every table of the paper.
+
+Columns (the interface in TEAM.md, plus a few extras the report needs):
+  run_id, run_dir, study, method, scene, seed, status, protocol, backend,
+  provider.depth, provider.masks, provider.features (and provider.<other> when results carry it),
+  axis.<key> for every grid axis seen in any run, metric, value (float, NaN = not computed),
+  metric_impl,
+  extras: protocols (comma-joined list of the protocols the run was evaluated under),
+  reason (why the value is missing, from results' `skipped`), source ("metrics" | "timings" |
+  "memory"), config_key (hash of the resolved config without seed, run id and paths: runs that
+  differ only by seed share it), machine.<key> (host, cpu, cores, torch, ...), env.<key>
+  (git_sha, platform, ... from the run's env.json when it exists: provenance only).
+
+Timings (train_s, eval_s, render_ms, ...) and memory (peak_rss_mb, ...) become rows too, so that
+the latent-d table can read them like any metric. Written as runs_dir/collected.parquet
+(pyarrow); when pyarrow is not importable, as collected.csv, and the caller is told which.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from gsbench.errors import InputError
+from gsbench.store import read_json, write_bytes_atomic, write_text_atomic
+
+BASE_COLUMNS = [
+    "run_id", "run_dir", "study", "method", "scene", "seed", "status", "protocol", "backend",
+    "provider.depth", "provider.masks", "provider.features",
+]
+TAIL_COLUMNS = ["metric", "value", "metric_impl", "reason", "source", "config_key"]
+REQUIRED_KEYS = ("run_id", "method", "scene", "metrics")
+# Keys of the resolved config that differ between runs of one cell without changing the experiment.
+_VOLATILE_CONFIG_KEYS = {"seed", "run_id", "scene", "scene_path", "run_dir", "out", "output", "cache_dir", "dropped"}
+COLLECTED_PARQUET = "collected.parquet"
+COLLECTED_CSV = "collected.csv"
+
+
+def find_results(runs_dir: Path) -> list[Path]:
+    """Every results.json under runs_dir (sorted), skipping hidden folders such as caches."""
+    runs_dir = Path(runs_dir)
+    if not runs_dir.exists():
+        raise FileNotFoundError(f"{runs_dir}: runs folder not found")
+    if not runs_dir.is_dir():
+        raise NotADirectoryError(f"{runs_dir}: not a folder")
+    out = []
+    for p in sorted(runs_dir.rglob("results.json")):
+        rel = p.relative_to(runs_dir).parts
+        if any(part.startswith(".") for part in rel[:-1]):
+            continue
+        out.append(p)
+    return out
+
+
+def _as_float(value: Any, path: Path, what: str) -> float:
+    if value is None:
+        return math.nan
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"{path}: {what} must be a number or null, got {value!r}")
+    v = float(value)
+    return v if math.isfinite(v) else math.nan
+
+
+def _scalar(value: Any) -> Any:
+    """Grid axis / machine values are scalars; anything else is kept as its JSON text."""
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return json.dumps(value, sort_keys=True)
+
+
+def config_key(config: Any) -> str:
+    """Hash of the resolved config without seed and path-like keys: the cell a run belongs to."""
+    def strip(obj: Any) -> Any:
+        if isinstance(obj, dict):
+            return {k: strip(v) for k, v in obj.items() if k not in _VOLATILE_CONFIG_KEYS}
+        if isinstance(obj, list):
+            return [strip(v) for v in obj]
+        return obj
+    text = json.dumps(strip(config if config is not None else {}), sort_keys=True, default=str)
+    return hashlib.sha1(text.encode("utf-8")).hexdigest()[:10]
+
+
+# `skipped` keys that name a group of metrics rather than one metric.
+SKIP_FAMILIES = {
+    "semantics": ("miou", "mbiou", "pixel_acc", "loc_acc", "removal"),
+    "semantic": ("miou", "mbiou", "pixel_acc", "loc_acc", "removal"),
+    "segmentation": ("miou", "mbiou", "pixel_acc", "loc_acc"),
+    "query": ("miou", "mbiou", "pixel_acc", "loc_acc", "removal"),
+    "removal": ("removal",),
+    "ordering": ("ordering",),
+    "timings": ("fps", "render_ms"),
+}
+
+
+QUERY_MODES = ("encode", "decode")
+
+
+def _skip_key_matches(key: str, metric: str) -> bool:
+    """Does a `skipped` key explain a missing metric? e.g. "lpips" -> lpips, "3dovs_encode" ->
+    miou_3dovs_encode and miou_3dovs (the configured mode), "semantics" -> every semantic metric."""
+    if not metric:
+        return False
+    if metric.startswith(key) or key.startswith(metric):
+        return True
+    mtok = set(metric.split("_"))
+    has_mode = bool(mtok & set(QUERY_MODES))
+    for t in key.split("_"):
+        if t in mtok:
+            continue
+        if t in QUERY_MODES and not has_mode:
+            continue
+        if t in SKIP_FAMILIES and any(metric.startswith(f) for f in SKIP_FAMILIES[t]):
+            continue
+        return False
+    return True
+
+
+def missing_reason(metric: str, skipped: dict, status: str) -> str:
+    """Why `metric` has no value: the matching entries of results' `skipped` (the metric itself,
+    a prefix of it such as `miou_lerf` for `miou_lerf_encode`, a token such as `lpips` / `lerf` /
+    `3dovs`, or a family such as `semantics`), else the run status, else "no reason recorded"."""
+    reasons = []
+    if metric in skipped:
+        reasons.append(str(skipped[metric]))
+    else:
+        for key, why in skipped.items():
+            if _skip_key_matches(str(key), metric):
+                reasons.append(str(why))
+    if not reasons and status != "done":
+        reasons.append(f"run {status}")
+    if not reasons:
+        reasons.append("no reason recorded")
+    seen: list[str] = []
+    for r in reasons:
+        if r not in seen:
+            seen.append(r)
+    return "; ".join(seen)
+
+
+ENV_KEYS = ("git_sha", "gsbench", "platform", "python", "torch", "numpy")
+
+
+def _read_env(path: Path) -> dict:
+    """The run's env.json (versions, git sha), when present: provenance for the report."""
+    if not path.exists():
+        return {}
+    env = read_json(path)
+    if not isinstance(env, dict):
+        raise InputError(f"{path}: env.json must hold a JSON object")
+    return env
+
+
+def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
+    if not isinstance(res, dict):
+        raise InputError(f"{path}: results.json must hold a JSON object, got {type(res).__name__}")
+    for key in REQUIRED_KEYS:
+        if key not in res:
+            raise InputError(f"{path}: missing key '{key}'")
+    metrics = res.get("metrics") or {}
+    if not isinstance(metrics, dict):
+        raise InputError(f"{path}: 'metrics' must be an object")
+    skipped = res.get("skipped") or {}
+    if not isinstance(skipped, dict):
+        raise InputError(f"{path}: 'skipped' must be an object")
+    grid = res.get("grid") or {}
+    if not isinstance(grid, dict):
+        raise InputError(f"{path}: 'grid' must be an object")
+    providers = res.get("providers") or {}
+    if not isinstance(providers, dict):
+        raise InputError(f"{path}: 'providers' must be an object")
+    machine = res.get("machine") or {}
+    if not isinstance(machine, dict):
+        raise InputError(f"{path}: 'machine' must be an object")
+    metric_impl = res.get("metric_impl") or {}
+    status = str(res.get("status") or "done")
+    seed = res.get("seed")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
+        raise InputError(f"{path}: 'seed' must be an integer or null, got {seed!r}")
+
+    base: dict[str, Any] = {
+        "run_id": str(res["run_id"]),
+        "run_dir": str(path.parent),
+        "study": res.get("study"),
+        "method": str(res["method"]),
+        "scene": str(res["scene"]),
+        "seed": seed,
+        "status": status,
+        "protocol": res.get("protocol"),
+        "protocols": ",".join(str(p) for p in res.get("protocols") or ([res["protocol"]] if res.get("protocol") else [])),
+        "backend": res.get("backend"),
+        "provider.depth": providers.get("depth"),
+        "provider.masks": providers.get("masks"),
+        "provider.features": providers.get("features"),
+        "config_key": config_key(res.get("config")),
+    }
+    for k, v in providers.items():
+        if f"provider.{k}" not in base:
+            base[f"provider.{k}"] = _scalar(v)
+    for k, v in grid.items():
+        base[f"axis.{k}"] = _scalar(v)
+    for k, v in machine.items():
+        base[f"machine.{k}"] = _scalar(v)
+    env = _read_env(path.parent / "env.json")
+    for k in ENV_KEYS:
+        if k in env:
+            base[f"env.{k}"] = _scalar(env[k])
+
+    entries: list[tuple[str, Any, str]] = [(m, v, "metrics") for m, v in metrics.items()]
+    present = set(metrics)
+    for section in ("timings", "memory"):
+        block = res.get(section) or {}
+        if not isinstance(block, dict):
+            raise InputError(f"{path}: '{section}' must be an object")
+        for m, v in block.items():
+            if m not in present:
+                entries.append((m, v, section))
+                present.add(m)
+    # A metric the evaluation skipped without writing a null still gets a row with its reason.
+    for m in skipped:
+        if m in known_metrics and m not in present:
+            entries.append((m, None, "metrics"))
+            present.add(m)
+
+    rows = []
+    for m, v, source in entries:
+        value = _as_float(v, path, f"{source}.{m}")
+        row = dict(base)
+        row["metric"] = str(m)
+        row["value"] = value
+        impl = metric_impl.get(m) if isinstance(metric_impl, dict) else None
+        row["metric_impl"] = str(impl) if impl is not None else (source if source != "metrics" else None)
+        row["reason"] = missing_reason(str(m), skipped, status) if math.isnan(value) else None
+        row["source"] = source
+        rows.append(row)
+    if not rows:  # a run with no metrics at all still shows up (status, reason)
+        row = dict(base)
+        row.update(metric=None, value=math.nan, metric_impl=None, source=None,
+                   reason=missing_reason("", skipped, status))
+        rows.append(row)
+    return rows
+
+
+def _normalise_axis(col: pd.Series) -> pd.Series:
+    """One type per axis column (Parquet needs it): numbers -> float, booleans -> boolean, else str."""
+    vals = [v for v in col.tolist() if v is not None and not (isinstance(v, float) and math.isnan(v))]
+    if vals and all(isinstance(v, bool) for v in vals):
+        return col.astype("boolean")
+    if vals and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals):
+        return pd.to_numeric(col, errors="raise").astype("float64")
+    return col.map(lambda v: None if v is None or (isinstance(v, float) and math.isnan(v)) else str(v)).astype(object)
+
+
+def collect(runs_dir: str | Path) -> pd.DataFrame:
+    """Read every results.json under runs_dir into the long table (no file written).
+
+    Runs found twice (same run_id in two folders, e.g. a copied run) are kept once, the first in
+    path order; the duplicates are listed in `df.attrs["warnings"]`.
+    """
+    from gsbench.reports.spec import KNOWN_METRICS
+
+    runs_dir = Path(runs_dir)
+    paths = find_results(runs_dir)
+    if not paths:
+        raise InputError(f"{runs_dir}: no results.json found (evaluate runs with `gsbench eval` first)")
+    rows: list[dict] = []
+    seen: dict[str, Path] = {}
+    warnings: list[str] = []
+    for p in paths:
+        res = read_json(p)
+        run_id = str(res.get("run_id")) if isinstance(res, dict) else None
+        if run_id is not None and run_id in seen:
+            warnings.append(f"{p}: run_id {run_id} already read from {seen[run_id]}; duplicate ignored")
+            continue
+        rows.extend(_rows_for(p, res, KNOWN_METRICS))
+        if run_id is not None:
+            seen[run_id] = p
+    df = pd.DataFrame(rows)
+    for c in BASE_COLUMNS + TAIL_COLUMNS:
+        if c not in df.columns:
+            df[c] = None
+    axis_cols = sorted(c for c in df.columns if c.startswith("axis."))
+    other = sorted(c for c in df.columns if c not in BASE_COLUMNS + TAIL_COLUMNS + axis_cols)
+    df = df[BASE_COLUMNS + axis_cols + TAIL_COLUMNS + other].copy()
+    for c in axis_cols:
+        df[c] = _normalise_axis(df[c])
+    df["value"] = df["value"].astype("float64")
+    df["seed"] = df["seed"].astype("Int64")
+    for c in df.columns:
+        if c.startswith(("machine.", "provider.", "env.")):
+            df[c] = df[c].map(lambda v: None if v is None or (isinstance(v, float) and math.isnan(v)) else str(v)).astype(object)
+        elif c not in ("value", "seed") and not c.startswith("axis."):
+            df[c] = _objects(df[c])
+    df.attrs["warnings"] = warnings
+    df.attrs["runs_dir"] = str(runs_dir)
+    return df
+
+
+def write_collected(df: pd.DataFrame, runs_dir: str | Path) -> Path:
+    """Write the long table next to the runs: Parquet when pyarrow is importable, else CSV."""
+    runs_dir = Path(runs_dir)
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError:
+        out = runs_dir / COLLECTED_CSV
+        write_text_atomic(out, df.to_csv(index=False))
+        return out
+    import io
+    buf = io.BytesIO()
+    plain = df.copy()
+    plain.attrs = {}
+    plain.to_parquet(buf, engine="pyarrow", index=False)
+    out = runs_dir / COLLECTED_PARQUET
+    write_bytes_atomic(out, buf.getvalue())
+    return out
+
+
+def read_collected(path: str | Path) -> pd.DataFrame:
+    """Read a collected.parquet / collected.csv written by `write_collected`."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: collected table not found")
+    try:
+        if path.suffix == ".parquet":
+            df = pd.read_parquet(path, engine="pyarrow")
+        elif path.suffix == ".csv":
+            df = pd.read_csv(path)
+        else:
+            raise InputError(f"{path}: expected a .parquet or .csv collected table")
+    except InputError:
+        raise
+    except Exception as e:
+        raise InputError(f"{path}: cannot read collected table ({type(e).__name__}: {e})") from None
+    missing = [c for c in BASE_COLUMNS + ["metric", "value"] if c not in df.columns]
+    if missing:
+        raise InputError(f"{path}: not a gsbench collected table (missing columns {missing})")
+    for c in TAIL_COLUMNS:
+        if c not in df.columns:
+            df[c] = None
+    # Back to plain Python objects (None for missing) so both formats behave the same.
+    for c in df.columns:
+        if c in ("value",):
+            df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
+        elif c == "seed":
+            df[c] = pd.to_numeric(df[c], errors="coerce").astype("Int64")
+        elif c.startswith("axis."):
+            col = df[c].astype(object).where(df[c].notna(), None)
+            if path.suffix == ".csv":
+                col = col.map(_csv_scalar)
+            df[c] = _normalise_axis(col)
+        else:
+            df[c] = _objects(df[c])
+    df.attrs["warnings"] = []
+    df.attrs["runs_dir"] = str(path.parent)
+    return df
+
+
+def _objects(col: pd.Series) -> pd.Series:
+    """Plain Python objects with None for missing (pandas would otherwise turn None into NaN)."""
+    out = col.astype(object)
+    return out.where(col.notna(), None)
+
+
+def _csv_scalar(v: Any) -> Any:
+    if isinstance(v, str):
+        if v in ("True", "False"):
+            return v == "True"
+        try:
+            return float(v)
+        except ValueError:
+            return v
+    return v

@@ -1,0 +1,156 @@
+"""Executors: run a function over a list of picklable items and return the results in order.
+
+The grid code only calls `executor.map(fn, items)`; it does not know which executor runs it.
+
+- `LocalExecutor(jobs)`: a process pool (spawn context: no forked torch/OpenMP state), one cell
+  per worker; each worker uses max(1, cores // jobs) torch threads so `--jobs N` never
+  oversubscribes the machine. On a CUDA machine, worker k is pinned to GPU k % n_gpus.
+- `SubmititExecutor(folder, cluster)`: submitit job arrays (`map_array`). cluster="slurm" submits
+  to SLURM, cluster="local" runs each job as a local subprocess (used in the tests), "debug" runs
+  in-process. SLURM parameters (partition, time, cpus, gpus, array parallelism) pass through.
+"""
+from __future__ import annotations
+
+import functools
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any, Callable, Optional, Sequence
+
+from tqdm import tqdm
+
+EXECUTORS = ("local", "submitit")
+
+
+def _cpu_count() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - non-Linux
+        return os.cpu_count() or 1
+
+
+def _init_worker(threads: int, gpu_queue: Any) -> None:
+    """Per-worker set-up: thread budget and (when there are GPUs) one GPU per worker.
+
+    The budget goes into OMP_NUM_THREADS / MKL_NUM_THREADS / GSBENCH_THREADS (torch reads the first
+    when it is imported); `apply_thread_budget()` calls torch.set_num_threads with it in the job."""
+    os.environ["OMP_NUM_THREADS"] = str(threads)
+    os.environ["MKL_NUM_THREADS"] = str(threads)
+    os.environ["GSBENCH_THREADS"] = str(threads)
+    if gpu_queue is not None:
+        os.environ["CUDA_VISIBLE_DEVICES"] = str(gpu_queue.get())
+    if "torch" in sys.modules:
+        apply_thread_budget()
+
+
+def apply_thread_budget() -> Optional[int]:
+    """torch.set_num_threads(GSBENCH_THREADS) when an executor set a budget for this process."""
+    n = os.environ.get("GSBENCH_THREADS")
+    if not n:
+        return None
+    import torch
+    torch.set_num_threads(int(n))
+    return int(n)
+
+
+class LocalExecutor:
+    """A spawn-context process pool with `jobs` workers."""
+
+    name = "local"
+
+    def __init__(self, jobs: int = 1, threads: Optional[int] = None, progress: bool = True) -> None:
+        if jobs < 1:
+            raise ValueError(f"--jobs must be >= 1, got {jobs}")
+        self.jobs = jobs
+        self.threads = threads if threads is not None else max(1, _cpu_count() // jobs)
+        self.progress = progress
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> list[Any]:
+        items = list(items)
+        if not items:
+            return []
+        ctx = get_context("spawn")
+        gpu_queue = None
+        n_gpus = _gpu_count()
+        if n_gpus > 0:
+            gpu_queue = ctx.Manager().Queue()
+            for k in range(self.jobs):
+                gpu_queue.put(k % n_gpus)
+        results: list[Any] = [None] * len(items)
+        with ProcessPoolExecutor(max_workers=min(self.jobs, len(items)), mp_context=ctx,
+                                 initializer=_init_worker, initargs=(self.threads, gpu_queue)) as pool:
+            futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
+            bar = tqdm(total=len(items), desc=f"cells (local, {self.jobs} jobs)", disable=not self.progress)
+            for fut in as_completed(futures):
+                results[futures[fut]] = fut.result()
+                bar.update(1)
+            bar.close()
+        return results
+
+
+def _gpu_count() -> int:
+    try:
+        import torch
+        return torch.cuda.device_count() if torch.cuda.is_available() else 0
+    except Exception:  # pragma: no cover
+        return 0
+
+
+def _call_with_threads(fn: Callable[[Any], Any], threads: int, item: Any) -> Any:
+    """Run fn(item) with a torch thread budget (submitit jobs start with the library default)."""
+    _init_worker(threads, None)
+    return fn(item)
+
+
+class SubmititExecutor:
+    """submitit job arrays; `cluster` is slurm (real cluster), local (subprocesses) or debug."""
+
+    name = "submitit"
+
+    def __init__(self, folder: str | os.PathLike, cluster: str = "slurm", progress: bool = True,
+                 **parameters: Any) -> None:
+        try:
+            import submitit
+        except ImportError:
+            raise ImportError("the submitit executor needs `pip install submitit` (extra `cluster`)") from None
+        if cluster not in ("slurm", "local", "debug"):
+            raise ValueError(f"submitit cluster must be slurm, local or debug, got {cluster!r}")
+        self.folder = Path(folder)
+        self.cluster = cluster
+        self.threads = parameters.get("cpus_per_task")
+        self.progress = progress
+        self._executor = submitit.AutoExecutor(folder=str(self.folder / "%j"), cluster=cluster)
+        params = {k: v for k, v in parameters.items() if v is not None}
+        if params:
+            self._executor.update_parameters(**params)
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> list[Any]:
+        items = list(items)
+        if not items:
+            return []
+        threads = self.threads or max(1, _cpu_count() // (len(items) if self.cluster == "local" else 1))
+        jobs = self._executor.map_array(functools.partial(_call_with_threads, fn, threads), items)
+        results = []
+        bar = tqdm(total=len(jobs), desc=f"cells (submitit {self.cluster})", disable=not self.progress)
+        for job in jobs:
+            results.append(job.result())
+            bar.update(1)
+        bar.close()
+        return results
+
+
+def make_executor(kind: str, jobs: int = 1, folder: Optional[str | os.PathLike] = None,
+                  cluster: str = "slurm", progress: bool = True, **slurm: Any) -> Any:
+    """Build an executor by name (the CLI's --executor)."""
+    if kind == "local":
+        return LocalExecutor(jobs=jobs, progress=progress)
+    if kind == "submitit":
+        if folder is None:
+            raise ValueError("the submitit executor needs a log folder")
+        params = dict(slurm)
+        if cluster == "slurm" and jobs:
+            params.setdefault("slurm_array_parallelism", jobs)
+        return SubmititExecutor(folder, cluster=cluster, progress=progress, **params)
+    raise ValueError(f"unknown executor {kind!r}; choose one of {', '.join(EXECUTORS)}")

@@ -1,0 +1,184 @@
+"""Weight-free mask propagation along the pseudo-video, and the adjacent mask IoU metric.
+
+Each view comes with its own segments (int32 map, ids meaningful in that view only, -1 none).
+`propagate` walks the pseudo-video order: the first frame's segments become tracks 0..k-1; for
+every next frame the previous frame's track map is warped into it, the warped tracks are matched
+to the frame's segments by IoU with the Hungarian method (scipy's linear_sum_assignment), matched
+segments inherit the track id and unmatched ones start new tracks. Two warpers:
+
+- `FlowWarper` (``flow``): DIS optical flow (OpenCV) between consecutive frames, each pixel of the
+  new frame looks up its source through the backward flow; a forward-backward consistency check
+  (|B(p) + F(p + B(p))|^2 < 0.01 (|B|^2 + |F|^2) + 0.5 px^2, Sundaram et al. 2010) marks
+  occluded / unreliable pixels unknown.
+- `ReprojectWarper` (``reproject``): unproject the previous frame with metric depth and forward
+  splat into the new frame with a z-buffer; pixels that receive no point are unknown.
+
+IoU for matching is computed inside the known region of the warp only (pixels the warp could
+say something about), so an object that leaves the view does not lose its track for that alone.
+"""
+from __future__ import annotations
+
+from typing import Callable, Mapping, Sequence
+
+import cv2
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from tqdm.auto import tqdm
+
+from gsbench.priors import warp as W
+from gsbench.scene import Camera
+
+DEFAULT_MIN_IOU = 0.3
+FB_ALPHA = 0.01
+FB_BETA = 0.5
+
+# warp(prev_view, cur_view, prev_labels) -> (labels in cur frame (-1 none), known bool map)
+Warper = Callable[[int, int, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def _gray_u8(img: np.ndarray) -> np.ndarray:
+    a = np.asarray(img, dtype=np.float32)
+    if a.ndim == 3:
+        a = cv2.cvtColor(np.ascontiguousarray(a[..., :3]), cv2.COLOR_RGB2GRAY)
+    return np.clip(np.rint(a * 255.0), 0, 255).astype(np.uint8)
+
+
+class FlowWarper:
+    """Backward warping with DIS optical flow and a forward-backward check."""
+
+    id = "flow-dis-fb"
+
+    def __init__(self, images: Mapping[int, np.ndarray], preset: int = cv2.DISOPTICAL_FLOW_PRESET_MEDIUM):
+        self.gray = {int(v): _gray_u8(im) for v, im in images.items()}
+        self.dis = cv2.DISOpticalFlow_create(preset)
+
+    def flows(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """(F: a -> b, B: b -> a) as H x W x 2 float32 pixel displacements."""
+        ga, gb = self.gray[a], self.gray[b]
+        return self.dis.calc(ga, gb, None), self.dis.calc(gb, ga, None)
+
+    def __call__(self, prev: int, cur: int, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        F, B = self.flows(prev, cur)
+        H, Wd = labels.shape
+        xs, ys = np.meshgrid(np.arange(Wd, dtype=np.float32), np.arange(H, dtype=np.float32))
+        qx = xs + B[..., 0]
+        qy = ys + B[..., 1]
+        Fq = cv2.remap(F, qx, qy, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        err = ((B + Fq) ** 2).sum(-1)
+        mag = (B ** 2).sum(-1) + (Fq ** 2).sum(-1)
+        ix = np.rint(qx).astype(np.int64)
+        iy = np.rint(qy).astype(np.int64)
+        inside = (ix >= 0) & (ix < Wd) & (iy >= 0) & (iy < H)
+        known = inside & (err < FB_ALPHA * mag + FB_BETA)
+        out = np.full((H, Wd), -1, dtype=np.int32)
+        out[known] = labels[iy[known], ix[known]]
+        return out, known
+
+
+class ReprojectWarper:
+    """Forward z-buffer reprojection with metric (camera-space z) depth maps at the mask size."""
+
+    id = "reproject-zbuffer"
+
+    def __init__(self, cameras: Mapping[int, Camera], depths: Mapping[int, np.ndarray],
+                 valids: Mapping[int, np.ndarray]):
+        self.cameras, self.depths, self.valids = cameras, depths, valids
+
+    def __call__(self, prev: int, cur: int, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        src, dst = self.cameras[prev], self.cameras[cur]
+        pts, flat = W.unproject(self.depths[prev], self.valids[prev], src)
+        vals = labels.reshape(-1)[flat].astype(np.int32)
+        out, zmap = W.zbuffer_splat(pts, vals, dst, fill=np.int32(-1))
+        return out, np.isfinite(zmap)
+
+
+def iou_matrix(a: np.ndarray, b: np.ndarray, known: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """IoU of every label of `a` against every label of `b` (labels >= 0), inside `known`.
+
+    Returns (ids_a, ids_b, iou[len(ids_a), len(ids_b)]).
+    """
+    if known is None:
+        known = np.ones(a.shape, dtype=bool)
+    av = a[known].astype(np.int64)
+    bv = b[known].astype(np.int64)
+    ids_a = np.unique(av[av >= 0])
+    ids_b = np.unique(bv[bv >= 0])
+    if len(ids_a) == 0 or len(ids_b) == 0:
+        return ids_a, ids_b, np.zeros((len(ids_a), len(ids_b)))
+    ia = np.searchsorted(ids_a, av)
+    ib = np.searchsorted(ids_b, bv)
+    ia = np.where(av >= 0, ia, len(ids_a))        # extra bin = unlabelled
+    ib = np.where(bv >= 0, ib, len(ids_b))
+    joint = np.bincount(ia * (len(ids_b) + 1) + ib, minlength=(len(ids_a) + 1) * (len(ids_b) + 1))
+    joint = joint.reshape(len(ids_a) + 1, len(ids_b) + 1)
+    inter = joint[:-1, :-1].astype(np.float64)
+    area_a = joint[:-1, :].sum(1).astype(np.float64)
+    area_b = joint[:, :-1].sum(0).astype(np.float64)
+    union = area_a[:, None] + area_b[None, :] - inter
+    iou = np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
+    return ids_a, ids_b, iou
+
+
+def match_segments(warped: np.ndarray, known: np.ndarray, segments: np.ndarray,
+                   min_iou: float = DEFAULT_MIN_IOU) -> dict[int, int]:
+    """Hungarian matching of segment ids to warped track ids; returns {segment id: track id}."""
+    tracks, segs, iou = iou_matrix(warped, segments, known)
+    if iou.size == 0:
+        return {}
+    rows, cols = linear_sum_assignment(-iou)
+    return {int(segs[c]): int(tracks[r]) for r, c in zip(rows, cols) if iou[r, c] >= min_iou}
+
+
+def propagate(order: Sequence[int], segments: Mapping[int, np.ndarray], warper: Warper,
+              min_iou: float = DEFAULT_MIN_IOU, progress: bool = False) -> dict[int, np.ndarray]:
+    """Per-view track maps (int32, -1 none) with ids consistent along the pseudo-video `order`."""
+    tracks: dict[int, np.ndarray] = {}
+    next_id = 0
+    prev = None
+    for v in tqdm(order, desc="propagate masks", disable=not progress, leave=False):
+        seg = np.asarray(segments[v]).astype(np.int32, copy=False)
+        mapping: dict[int, int] = {}
+        if prev is not None:
+            warped, known = warper(prev, v, tracks[prev])
+            mapping = match_segments(warped, known, seg, min_iou)
+        out = np.full(seg.shape, -1, dtype=np.int32)
+        for s in np.unique(seg[seg >= 0]):
+            s = int(s)
+            if s not in mapping:
+                mapping[s] = next_id
+                next_id += 1
+            out[seg == s] = mapping[s]
+        tracks[v] = out
+        prev = v
+    return tracks
+
+
+def adjacent_mask_iou(tracks: Mapping[int, np.ndarray], order: Sequence[int], cameras: Mapping[int, Camera],
+                      depths: Mapping[int, np.ndarray], valids: Mapping[int, np.ndarray]) -> float | None:
+    """Mean adjacent mask IoU of propagated masks along `order` (GAUSSIANDS.md, part 1).
+
+    For each consecutive pair (a, b) the track map of a is z-buffer reprojected into b with a's
+    metric depth (and b into a), and for every track id seen in the shared region (pixels that
+    receive a reprojected point) in either map, the IoU of that id's pixels is taken; an id that
+    only one of the two frames has scores 0. The pair's value is the mean over ids, averaged over
+    both directions; the result is the mean over pairs that share a region with labels (None if
+    none does).
+    """
+    warper = ReprojectWarper(cameras, depths, valids)
+    values = []
+    for a, b in zip(order[:-1], order[1:]):
+        pair = []
+        for s, d in ((a, b), (b, a)):
+            warped, known = warper(s, d, tracks[s])
+            ids_w, ids_d, iou = iou_matrix(warped, tracks[d], known)
+            ids = np.union1d(ids_w, ids_d)
+            if len(ids) == 0:
+                continue
+            scores = np.zeros(len(ids))
+            common, iw, idd = np.intersect1d(ids_w, ids_d, return_indices=True)
+            scores[np.searchsorted(ids, common)] = iou[iw, idd]
+            pair.append(float(scores.mean()))
+        if pair:
+            values.append(float(np.mean(pair)))
+    return float(np.mean(values)) if values else None

@@ -1,0 +1,152 @@
+"""Run folders: train a method into one (resumable, idempotent) and load it back.
+
+    run_dir = train_run(config, scene_path, run_dir)      # config from gsbench.config.load_config
+    method, config, scene = load_run(run_dir)
+
+Files (see gsbench/store.py): config.json (resolved: scene, run_id, dropped), env.json, status.json,
+train_log.jsonl, checkpoint.pt (trainer state, for resume), model.pt (the trained Method),
+train_summary.json (train_s, peak_rss_mb, iterations, n_gaussians, providers, dropped, backend, status).
+A folder whose status is "done" is not retrained; one with a checkpoint resumes from it.
+"""
+from __future__ import annotations
+
+import os
+import platform
+import resource
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from gsbench.config import resolve_for_scene, run_id
+from gsbench.errors import InputError, NonFiniteError
+from gsbench.store import read_json, write_json_atomic
+
+MODEL = "model.pt"
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process (Linux reports KiB)."""
+    r = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return float(r) / (1024.0 * 1024.0) if sys.platform == "darwin" else float(r) / 1024.0
+
+
+def env_info() -> dict:
+    sha = None
+    try:
+        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True,
+                             text=True, timeout=5).stdout.strip() or None
+    except Exception:  # git missing or not a checkout: recorded as None
+        sha = None
+    return {"python": sys.version.split()[0], "torch": torch.__version__, "numpy": np.__version__,
+            "platform": platform.platform(), "host": socket.gethostname(), "cpu_count": os.cpu_count(),
+            "torch_threads": torch.get_num_threads(), "git_sha": sha}
+
+
+def _status(run_dir: Path, state: str, message: str = "", **extra) -> None:
+    write_json_atomic(run_dir / "status.json", {"state": state, "message": message, "time": time.time(), **extra})
+
+
+def read_status(run_dir: Path) -> dict | None:
+    p = Path(run_dir) / "status.json"
+    return read_json(p) if p.exists() else None
+
+
+def _load_scene(scene_path):
+    from gsbench.datasets import load_scene
+    return load_scene(scene_path)
+
+
+def _fingerprint(scene_path) -> str:
+    from gsbench.datasets import scene_fingerprint
+    return scene_fingerprint(scene_path)
+
+
+def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: bool = True) -> Path:
+    """Resolve `config` for the scene, train (or resume) and write the run folder; returns run_dir."""
+    from gsbench.methods import get_method
+
+    run_dir = Path(run_dir)
+    scene_path = Path(scene_path)
+    fp = _fingerprint(scene_path)
+    rid = run_id(config, fp)
+    st = read_status(run_dir)
+    if (run_dir / "config.json").exists():
+        old = read_json(run_dir / "config.json")
+        if old.get("run_id") != rid:
+            raise InputError(f"{run_dir}: the folder holds run {old.get('run_id')} (another config or scene); "
+                             f"use a new --out folder")
+    if st is not None and st.get("state") == "done":
+        if progress:
+            print(f"gsbench train: {run_dir} is already done (run {rid}); not retrained")
+        return run_dir
+    scene = _load_scene(scene_path)
+    cfg, dropped = resolve_for_scene(config, scene)
+    cfg["scene"] = {"path": str(scene_path.resolve()), "name": scene.name, "fingerprint": fp}
+    cfg["run_id"] = rid
+    for part, why in dropped.items():
+        print(f"gsbench train: dropped {part}: {why}", file=sys.stderr)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    seed = int(cfg["seed"])
+    torch.manual_seed(seed)
+    np.random.seed(seed)
+    threads_before = torch.get_num_threads()
+    torch.set_num_threads(max(1, os.cpu_count() or 1))
+    write_json_atomic(run_dir / "config.json", cfg)
+    write_json_atomic(run_dir / "env.json", env_info())
+    prev_s = float((st or {}).get("train_s_so_far") or 0.0)
+    _status(run_dir, "running", "", train_s_so_far=prev_s)
+    method = get_method(cfg["method"])()
+    t0 = time.perf_counter()
+    try:
+        method.fit(scene, run_dir, cfg, progress=progress)
+    except NonFiniteError as e:
+        _finish(run_dir, method, cfg, "nonfinite", str(e), prev_s + time.perf_counter() - t0)
+        raise
+    except KeyboardInterrupt:
+        _status(run_dir, "failed", "interrupted; re-run to resume from the last checkpoint",
+                train_s_so_far=prev_s + time.perf_counter() - t0)
+        raise
+    except Exception as e:
+        _status(run_dir, "failed", f"{type(e).__name__}: {e}", train_s_so_far=prev_s + time.perf_counter() - t0)
+        raise
+    finally:
+        torch.set_num_threads(threads_before)
+    train_s = prev_s + time.perf_counter() - t0
+    method.save(run_dir / MODEL)
+    _finish(run_dir, method, cfg, "done", "", train_s)
+    return run_dir
+
+
+def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s: float) -> None:
+    from gsbench.store import read_jsonl
+    log = read_jsonl(run_dir / "train_log.jsonl")
+    steps = [int(r["step"]) for r in log if "step" in r]
+    last_eval = next((r["eval"] for r in reversed(log) if "eval" in r), None)
+    n = method.field.num if getattr(method, "field", None) is not None else None
+    summary = {"run_id": cfg.get("run_id"), "method": cfg["method"], "status": state, "message": message,
+               "train_s": train_s, "peak_rss_mb": peak_rss_mb(),
+               "iterations": max(steps) if steps else 0, "n_gaussians": n,
+               "providers": method.provider_ids(), "dropped": cfg.get("dropped", {}), "backend": method.backend,
+               "last_eval": last_eval, "info": getattr(method, "info", {})}
+    write_json_atomic(run_dir / "train_summary.json", summary)
+    _status(run_dir, state, message, train_s_so_far=train_s)
+
+
+def load_run(run_dir: str | Path):
+    """(trained Method, resolved config, Scene) of a finished run folder."""
+    from gsbench.methods import Method
+    run_dir = Path(run_dir)
+    st = read_status(run_dir)
+    if st is None:
+        raise FileNotFoundError(f"{run_dir / 'status.json'}: not a run folder (no status.json)")
+    if st.get("state") != "done":
+        raise InputError(f"{run_dir}: run is not finished (status {st.get('state')!r}: {st.get('message', '')})")
+    cfg = read_json(run_dir / "config.json")
+    method = Method.load(run_dir / MODEL)
+    scene = _load_scene(cfg["scene"]["path"])
+    return method, cfg, scene

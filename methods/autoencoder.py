@@ -1,0 +1,81 @@
+"""The feature autoencoder of GaussianDS: 512 -> 256 -> 128 -> 64 -> 32 -> d, decoder mirrored.
+
+Both the latent and the reconstruction are L2-normalised (cosine geometry, like CLIP features).
+It is trained on the scene's mask features (one 512-d unit vector per (view, track)), then frozen;
+the per-pixel target is S = encoder(feature of the pixel's mask). Loss: L2 + (1 - cosine) of the
+reconstruction, full batch Adam, seeded.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+
+def _mlp(dims: Sequence[int]) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for i in range(len(dims) - 1):
+        layers.append(nn.Linear(dims[i], dims[i + 1]))
+        if i < len(dims) - 2:
+            layers.append(nn.ReLU())
+    return nn.Sequential(*layers)
+
+
+def _unit(x: torch.Tensor) -> torch.Tensor:
+    return x / x.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
+class FeatureAutoencoder(nn.Module):
+    """Encoder in_dim -> hidden... -> d and the mirrored decoder; outputs are unit vectors."""
+
+    def __init__(self, in_dim: int = 512, latent_dim: int = 3, hidden: Sequence[int] = (256, 128, 64, 32)) -> None:
+        super().__init__()
+        if latent_dim < 1:
+            raise ValueError(f"gaussiands.latent_dim must be >= 1, got {latent_dim}")
+        self.in_dim, self.latent_dim, self.hidden = int(in_dim), int(latent_dim), [int(h) for h in hidden]
+        self.encoder = _mlp([self.in_dim, *self.hidden, self.latent_dim])
+        self.decoder = _mlp([self.latent_dim, *reversed(self.hidden), self.in_dim])
+
+    def encode(self, x: torch.Tensor) -> torch.Tensor:
+        return _unit(self.encoder(x))
+
+    def decode(self, z: torch.Tensor) -> torch.Tensor:
+        return _unit(self.decoder(z))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.decode(self.encode(x))
+
+    def config(self) -> dict:
+        return {"in_dim": self.in_dim, "latent_dim": self.latent_dim, "hidden": self.hidden}
+
+
+def train_autoencoder(features: np.ndarray, latent_dim: int, hidden: Sequence[int] = (256, 128, 64, 32),
+                      epochs: int = 200, lr: float = 1e-3, seed: int = 0) -> tuple[FeatureAutoencoder, dict]:
+    """Fit the autoencoder on (M, 512) features (full batch); return it frozen and in eval mode."""
+    x = np.asarray(features, dtype=np.float32)
+    if x.ndim != 2 or x.shape[0] < 1:
+        raise ValueError(f"autoencoder needs an (M, D) feature matrix with M >= 1, got shape {x.shape}")
+    if not np.isfinite(x).all():
+        raise ValueError("autoencoder: mask features contain NaN or inf")
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(int(seed))
+        ae = FeatureAutoencoder(x.shape[1], latent_dim, hidden)
+    xt = _unit(torch.from_numpy(x))
+    opt = torch.optim.Adam(ae.parameters(), lr=lr)
+    loss = torch.tensor(float("nan"))
+    for _ in range(int(epochs)):
+        opt.zero_grad(set_to_none=True)
+        rec = ae(xt)
+        loss = ((rec - xt) ** 2).sum(-1).mean() + (1.0 - (rec * xt).sum(-1)).mean()
+        loss.backward()
+        opt.step()
+    ae.eval()
+    for p in ae.parameters():
+        p.requires_grad_(False)
+    with torch.no_grad():
+        cos = (ae(xt) * xt).sum(-1)
+    stats = {"ae_final_loss": float(loss.detach()), "ae_mean_cosine": float(cos.mean()),
+             "ae_min_cosine": float(cos.min()), "ae_n_features": int(x.shape[0])}
+    return ae, stats

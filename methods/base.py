@@ -1,0 +1,223 @@
+"""The Method protocol (NerfBaselines-like: fit / render / save / load) and the shared implementation.
+
+Every method in gsbench is a Gaussian field plus, for semantic methods, a frozen feature autoencoder
+and the id of the feature provider that embeds text:
+
+    m = get_method("gaussiands")()
+    m.fit(scene, run_dir, config)             # writes train_log.jsonl and checkpoint.pt into run_dir
+    m.save(run_dir / "model.pt"); m = Method.load(run_dir / "model.pt")
+    m.render(camera)                          # RenderOutput; .features = rendered latent S_hat (or None)
+    m.semantic_features(camera, "encode")     # (H, W, d) S_hat           | "decode": (H, W, 512) decoded
+    m.embed_text(["mug"], "encode")           # (Q, d) AE-encoded text     | "decode": (Q, 512) CLIP text
+    m.remove("mug", threshold)                # (copy without the Gaussians whose latent cosine > threshold, n_pruned)
+
+`semantic_features` and `embed_text` return the same space per mode, so a consumer takes the cosine of
+the two. Methods without semantics return None from both.
+"""
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Optional
+
+import cv2
+import numpy as np
+import torch
+
+from gsbench.gaussians import GaussianField
+from gsbench.render import RenderOutput, render
+from gsbench.scene import Camera
+from gsbench.store import load_torch, save_torch_atomic
+
+from gsbench.methods.autoencoder import FeatureAutoencoder
+from gsbench.methods.trainer import TrainViews
+
+QUERY_MODES = ("encode", "decode")
+MODEL_FILE = "model.pt"
+
+
+def _unit(x: torch.Tensor) -> torch.Tensor:
+    return x / x.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
+def removal_mask(latents: torch.Tensor, query: torch.Tensor, threshold: float) -> torch.Tensor:
+    """True for Gaussians whose latent cosine with the (d,) query exceeds `threshold` (strictly)."""
+    cos = (_unit(latents) * _unit(query.reshape(1, -1))).sum(-1)
+    zero = latents.norm(dim=-1) <= 1e-12           # an all-zero latent has no direction: never removed
+    return (cos > float(threshold)) & ~zero
+
+
+class Method:
+    """Shared implementation; subclasses implement `fit`."""
+
+    name = "base"
+
+    def __init__(self) -> None:
+        self.field: Optional[GaussianField] = None
+        self.config: dict = {}
+        self.autoencoder: Optional[FeatureAutoencoder] = None
+        self.providers: dict = {"depth": None, "masks": None, "features": None, "ordering": None}
+        self._backend: str = "torch"
+        self._feature_provider = None
+        self.info: dict = {}
+
+    # ------------------------------------------------------------------ protocol
+    def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:  # pragma: no cover
+        raise NotImplementedError
+
+    @property
+    def backend(self) -> str:
+        return self._backend
+
+    def provider_ids(self) -> dict:
+        return dict(self.providers)
+
+    def _require_field(self) -> GaussianField:
+        if self.field is None:
+            raise RuntimeError(f"{self.name}: not trained or loaded")
+        return self.field
+
+    def _background(self) -> torch.Tensor:
+        bg = (self.config.get("train", {}) or {}).get("background") or [0.0, 0.0, 0.0]
+        return torch.tensor(bg, dtype=torch.float32)
+
+    def render(self, camera: Camera) -> RenderOutput:
+        """RGB, depth, alpha and the rendered latent S_hat (features, or None) of a camera."""
+        with torch.no_grad():
+            return render(self._require_field(), camera, backend=self._backend, background=self._background())
+
+    @property
+    def has_semantics(self) -> bool:
+        return self.field is not None and self.field.features is not None and self.autoencoder is not None
+
+    def semantic_features(self, camera: Camera, mode: str = "encode") -> Optional[torch.Tensor]:
+        """encode: rendered S_hat (H, W, d); decode: AE-decoded S_hat (H, W, 512), unit vectors."""
+        _check_mode(mode)
+        if not self.has_semantics:
+            return None
+        feats = self.render(camera).features
+        if mode == "encode":
+            return feats
+        with torch.no_grad():
+            return self.autoencoder.decode(feats.reshape(-1, feats.shape[-1])).reshape(feats.shape[0], feats.shape[1], -1)
+
+    def feature_provider(self):
+        if self._feature_provider is None:
+            from gsbench.priors import get_feature_provider
+            self._feature_provider = get_feature_provider(self.config["priors"]["features"])
+        return self._feature_provider
+
+    def embed_text(self, texts: list[str], mode: str = "encode") -> Optional[torch.Tensor]:
+        """encode: AE encoder of the provider's text embedding (Q, d); decode: the text embedding (Q, 512)."""
+        _check_mode(mode)
+        if not self.has_semantics:
+            return None
+        t = torch.as_tensor(np.asarray(self.feature_provider().encode_text(list(texts)), dtype=np.float32))
+        if mode == "decode":
+            return _unit(t)
+        with torch.no_grad():
+            return self.autoencoder.encode(t)
+
+    def remove(self, query: str, threshold: Optional[float] = None) -> tuple["Method", int]:
+        """Object removal: a copy without the Gaussians whose latent cosine with the encoded query > threshold."""
+        if not self.has_semantics:
+            raise ValueError(f"method {self.name}: object removal needs semantic latents (this run has none)")
+        thr = float(self.config.get("removal", {}).get("threshold", 0.9) if threshold is None else threshold)
+        q = self.embed_text([query], "encode")[0]
+        fld = self._require_field()
+        drop = removal_mask(fld.features, q, thr)
+        out = copy.copy(self)
+        out.field = fld.subset(~drop)
+        out.info = dict(self.info, removed_query=query, removal_threshold=thr)
+        return out, int(drop.sum())
+
+    # ------------------------------------------------------------------ persistence
+    def state(self) -> dict:
+        return {"method": self.name, "field": self._require_field().state_dict(), "config": self.config,
+                "autoencoder": None if self.autoencoder is None else
+                {"config": self.autoencoder.config(), "state": self.autoencoder.state_dict()},
+                "providers": self.providers, "backend": self._backend, "info": self.info}
+
+    def save(self, path: str | Path) -> None:
+        save_torch_atomic(Path(path), self.state())
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Method":
+        st = load_torch(Path(path))
+        if not isinstance(st, dict) or "field" not in st:
+            raise ValueError(f"{path}: not a gsbench model file")
+        from gsbench.methods import get_method
+        klass = get_method(st["method"]) if cls is Method else cls
+        m = klass()
+        m.field = GaussianField.from_state_dict(st["field"])
+        m.config = st["config"]
+        if st.get("autoencoder"):
+            c = st["autoencoder"]["config"]
+            ae = FeatureAutoencoder(c["in_dim"], c["latent_dim"], c["hidden"])
+            ae.load_state_dict(st["autoencoder"]["state"])
+            ae.eval()
+            for p in ae.parameters():
+                p.requires_grad_(False)
+            m.autoencoder = ae
+        m.providers = st.get("providers", m.providers)
+        m._backend = st.get("backend", "torch")
+        m.info = st.get("info", {})
+        return m
+
+
+def _check_mode(mode: str) -> None:
+    if mode not in QUERY_MODES:
+        raise ValueError(f"query mode must be one of {', '.join(QUERY_MODES)}, got {mode!r}")
+
+
+# ---------------------------------------------------------------------------- shared data preparation
+def training_size(camera: Camera, max_width: Optional[int]) -> tuple[int, int]:
+    """(W, H) of the training images: the camera's size, downscaled to at most `max_width` wide."""
+    w, h = camera.width, camera.height
+    if max_width and w > int(max_width):
+        s = int(max_width) / w
+        return int(max_width), max(1, int(round(h * s)))
+    return w, h
+
+
+def load_views(scene, config: dict, progress: bool = False) -> tuple[TrainViews, tuple[int, int]]:
+    """Train cameras/images at the training resolution, plus the first `eval_views` test views."""
+    tcfg = config["train"]
+    if not scene.train_ids:
+        raise ValueError(f"{scene.path}: the scene has no training views")
+    W, H = training_size(scene.cameras[scene.train_ids[0]], tcfg.get("max_width"))
+
+    def load(i: int) -> tuple[Camera, torch.Tensor]:
+        img = np.asarray(scene.image(i), dtype=np.float32)
+        if img.ndim != 3 or img.shape[2] < 3:
+            raise ValueError(f"{scene.image_paths[i] if scene.image_paths else scene.path}: expected an RGB image, got shape {img.shape}")
+        img = img[..., :3]
+        if img.shape[1] != W or img.shape[0] != H:
+            img = cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA)
+        return scene.cameras[i].resized(W, H), torch.from_numpy(np.clip(img, 0.0, 1.0).copy())
+
+    views = TrainViews({}, {})
+    for i in scene.train_ids:
+        views.cameras[i], views.images[i] = load(i)
+    n_eval = int(tcfg.get("eval_views") or 0)
+    test = list(scene.test_ids)
+    if n_eval > 0 and test:
+        pick = [test[int(j)] for j in np.unique(np.linspace(0, len(test) - 1, min(n_eval, len(test))).round().astype(int))]
+        for i in pick:
+            views.eval_cameras[i], views.eval_images[i] = load(i)
+    return views, (W, H)
+
+
+def scene_init(scene, config: dict, feature_dim: int):
+    """Initial field from the config's init mode ('auto' = points when the scene has them)."""
+    from gsbench.methods.trainer import init_field
+    icfg = config["train"]["init"]
+    mode = icfg["mode"]
+    if mode == "auto":
+        mode = "points" if scene.has_points else "random"
+    centres = np.stack([c.center for c in scene.cameras])
+    centre = centres.mean(0)
+    half = float(scene.extent or 1.0) * float(icfg.get("random_scale", 1.0))
+    pc = getattr(scene, "point_colors", None)
+    return init_field(scene.points, pc, mode, int(icfg["num_random"]), centre, half,
+                      int(config["train"]["sh_degree"]), feature_dim, int(config["seed"]))

@@ -1,0 +1,64 @@
+"""Glue shared by the methods: which inputs a resolved config uses, priors, render backend, trainer call."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable, Optional
+
+import torch
+
+from gsbench.gaussians import GaussianField
+from gsbench.render import resolve_backend
+
+from gsbench.methods.trainer import LossResult, Trainer, TrainViews, periodic_eval
+
+
+def uses(config: dict) -> dict:
+    """What the (resolved) config feeds: a depth prior (depth or ds loss) and semantics (sem or ds loss)."""
+    method = config.get("method", "gaussiands")
+    if method == "vanilla":
+        return {"depth_prior": False, "semantics": False}
+    if method == "twostage":
+        return {"depth_prior": False, "semantics": bool(config["gaussiands"]["losses"]["sem"])}
+    on = config["gaussiands"]["losses"]
+    depth_terms = bool(on["depth"] and config["gaussiands"]["depth_formulation"] != "none") or bool(on["ds"])
+    return {"depth_prior": depth_terms, "semantics": bool(on["sem"] or on["ds"])}
+
+
+def resolve_render_backend(config: dict) -> str:
+    """The concrete backend id ('auto' -> cpu on CPU tensors); checked importable now, not mid-run."""
+    name = resolve_backend(config.get("backend", "auto"), torch.device("cpu"))
+    if name == "cpu":
+        try:
+            import gsbench.render.cpu_backend  # noqa: F401
+        except ImportError as e:
+            raise ValueError(f"render backend 'cpu' is not available in this build ({e}); use --set backend=torch") from None
+    return name
+
+
+def cache_dir_for(config: dict, run_dir: Path) -> Path:
+    c = config["priors"].get("cache_dir")
+    return Path(c) if c else Path(run_dir).resolve().parent / ".gsbench_cache"
+
+
+def fit_priors(scene, config: dict, run_dir: Path, view_ids: list[int], size: tuple[int, int], *,
+               need_depth: bool, need_sem: bool, per_frame: bool, progress: bool):
+    from gsbench.priors import prepare_priors
+    return prepare_priors(scene, config["priors"], list(view_ids), size, cache_dir_for(config, run_dir),
+                          need_depth=need_depth, need_masks=need_sem, need_features=need_sem,
+                          per_frame_masks=per_frame, seed=int(config["seed"]), progress=progress)
+
+
+def run_trainer(config: dict, views: TrainViews, scene, field0: GaussianField, run_dir: Path,
+                loss_fn: Callable, *, phase: str, backend: str, progress: bool, resume: Optional[dict],
+                iterations: Optional[int] = None, trainable: Optional[set] = None, densify: bool = True,
+                extra_state: Optional[Callable[[], dict]] = None) -> GaussianField:
+    """Run one trainer phase, resuming when `resume` is a checkpoint of that phase."""
+    tr = Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase=phase,
+                 iterations=iterations, trainable=trainable, densify=densify, backend=backend,
+                 seed=int(config["seed"]), extra_state=extra_state)
+    tr.eval_fn = periodic_eval(views, backend, tr.background)
+    st = resume if (resume is not None and resume.get("phase") == phase) else None
+    return tr.run(progress=progress, resume_state=st)
+
+
+__all__ = ["uses", "resolve_render_backend", "fit_priors", "run_trainer", "LossResult", "cache_dir_for"]

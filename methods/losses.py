@@ -1,0 +1,260 @@
+"""Training losses of the shared trainer and of GaussianDS (paper Sec. III-IV, GAUSSIANDS.md).
+
+All image tensors are (H, W, C) or (H, W). Every division, sqrt and normalisation is guarded.
+
+- `ssim`: differentiable SSIM (Gaussian window 11, sigma 1.5, zero padding as in 3DGS), mean over pixels/channels.
+- `reconstruction_loss`: L_rec = (1 - lambda) L1 + lambda (1 - SSIM).
+- `solve_scale_shift`: closed-form least squares s, t with s * prior + t ~ target, in float64 on centred,
+  magnitude-normalised data, no gradient; returns ok=False (the caller skips and counts) when the prior is
+  (near) constant on the valid pixels or fewer than `min_valid` pixels are valid.
+- `depth_loss`: the depth formulations `none | raw_l1 | minmax | scale_shift | pearson`. A `disparity`
+  prior is compared with the inverse rendered depth (1 / max(D, DEPTH_EPS)); `depth`/`metric` with D.
+- `tv_loss`: isotropic TV sqrt(dx^2 + dy^2 + eps) averaged over pixels (the paper writes a sum; see GAUSSIANDS.md).
+- `sem_loss`: mean |S_hat - S| over the pixels that have a target (and over the d channels).
+- `depth_edges`: E_d = Canny on the (aligned) prior normalised to 8 bits over its valid pixels, optional dilation.
+  Min-max normalisation to 8 bits makes E_d invariant to any alignment s * prior + t with s > 0, so
+  E_d is computed once per view (tests check the invariance).
+- `ds_loss`: mean |E_d * (S_hat - S)| over the pixels that have a target.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+DEPTH_FORMULATIONS = ("none", "raw_l1", "minmax", "scale_shift", "pearson")
+DEPTH_EPS = 1e-6          # rendered depth below this is "no surface" (not inverted, not used)
+CONSTANT_REL_EPS = 1e-9   # prior whose std is below this fraction of its magnitude is "constant"
+SSIM_C1 = 0.01 ** 2
+SSIM_C2 = 0.03 ** 2
+
+
+# ---------------------------------------------------------------------------- SSIM / reconstruction
+def _gaussian_window(size: int, sigma: float, channels: int, device, dtype) -> torch.Tensor:
+    x = torch.arange(size, device=device, dtype=torch.float64) - (size - 1) / 2.0
+    g = torch.exp(-(x * x) / (2.0 * sigma * sigma))
+    g = g / g.sum()
+    w2 = (g[:, None] @ g[None, :]).to(dtype)
+    return w2.expand(channels, 1, size, size).contiguous()
+
+
+def ssim(img1: torch.Tensor, img2: torch.Tensor, window_size: int = 11, sigma: float = 1.5) -> torch.Tensor:
+    """Mean SSIM of two (H, W, C) images in [0, 1]; differentiable (training loss, not the metric)."""
+    return ssim_map(img1, img2, window_size, sigma).mean()
+
+
+def ssim_map(img1: torch.Tensor, img2: torch.Tensor, window_size: int = 11, sigma: float = 1.5) -> torch.Tensor:
+    """Per-pixel SSIM (1, C, H, W) with zero padding ('same' size, as the 3DGS training loss)."""
+    if img1.shape != img2.shape:
+        raise ValueError(f"ssim: shapes differ {tuple(img1.shape)} vs {tuple(img2.shape)}")
+    if img1.dim() == 2:
+        img1, img2 = img1[..., None], img2[..., None]
+    c = img1.shape[-1]
+    a = img1.permute(2, 0, 1)[None]
+    b = img2.permute(2, 0, 1)[None]
+    w = _gaussian_window(window_size, sigma, c, a.device, a.dtype)
+    pad = window_size // 2
+    mu1 = F.conv2d(a, w, padding=pad, groups=c)
+    mu2 = F.conv2d(b, w, padding=pad, groups=c)
+    mu1_sq, mu2_sq, mu12 = mu1 * mu1, mu2 * mu2, mu1 * mu2
+    s1 = F.conv2d(a * a, w, padding=pad, groups=c) - mu1_sq
+    s2 = F.conv2d(b * b, w, padding=pad, groups=c) - mu2_sq
+    s12 = F.conv2d(a * b, w, padding=pad, groups=c) - mu12
+    num = (2 * mu12 + SSIM_C1) * (2 * s12 + SSIM_C2)
+    den = (mu1_sq + mu2_sq + SSIM_C1) * (s1 + s2 + SSIM_C2)   # >= C1 * C2 > 0 up to rounding
+    return num / den.clamp_min(1e-12)
+
+
+def l1(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    return (a - b).abs().mean()
+
+
+def reconstruction_loss(pred: torch.Tensor, gt: torch.Tensor, lambda_dssim: float = 0.2) -> torch.Tensor:
+    """L_rec = (1 - lambda) L1 + lambda (1 - SSIM) (3DGS)."""
+    return (1.0 - lambda_dssim) * l1(pred, gt) + lambda_dssim * (1.0 - ssim(pred, gt))
+
+
+# ---------------------------------------------------------------------------- depth
+@dataclass
+class ScaleShift:
+    s: float
+    t: float
+    ok: bool
+    reason: str = ""
+    n_valid: int = 0
+
+
+def solve_scale_shift(prior: np.ndarray | torch.Tensor, target: np.ndarray | torch.Tensor,
+                      valid: Optional[np.ndarray | torch.Tensor] = None, min_valid: int = 10) -> ScaleShift:
+    """argmin_{s,t} sum_valid (s * prior + t - target)^2 in closed form (float64, centred, no gradient).
+
+    Both inputs are divided by their largest valid magnitude first, so huge magnitudes neither overflow
+    nor lose precision; s is scaled back at the end. Returns ok=False with a reason when fewer than
+    `min_valid` finite valid pixels remain or the prior is (near) constant on them.
+    """
+    x = _np64(prior).reshape(-1)
+    y = _np64(target).reshape(-1)
+    m = np.isfinite(x) & np.isfinite(y)
+    if valid is not None:
+        m &= _np_bool(valid).reshape(-1)
+    n = int(m.sum())
+    if n < max(2, int(min_valid)):
+        return ScaleShift(1.0, 0.0, False, f"{n} valid pixels (< {min_valid})", n)
+    x, y = x[m], y[m]
+    ax = float(np.max(np.abs(x)))
+    ay = float(np.max(np.abs(y)))
+    if ax == 0.0:
+        return ScaleShift(1.0, 0.0, False, "prior is constant (all zero)", n)
+    ay = ay if ay > 0.0 else 1.0
+    xs, ys = x / ax, y / ay
+    xm, ym = float(xs.mean()), float(ys.mean())
+    xc, yc = xs - xm, ys - ym
+    var = float(np.dot(xc, xc))
+    if not np.isfinite(var) or var <= (CONSTANT_REL_EPS ** 2) * n * max(1.0, xm * xm):
+        return ScaleShift(1.0, 0.0, False, "prior is (near) constant on the valid pixels", n)
+    s_n = float(np.dot(xc, yc)) / var
+    t_n = ym - s_n * xm
+    s = s_n * ay / ax
+    t = t_n * ay
+    if not (np.isfinite(s) and np.isfinite(t)):
+        return ScaleShift(1.0, 0.0, False, "non-finite scale/shift", n)
+    return ScaleShift(s, t, True, "", n)
+
+
+def _np64(a) -> np.ndarray:
+    if isinstance(a, torch.Tensor):
+        a = a.detach().cpu().numpy()
+    return np.asarray(a, dtype=np.float64)
+
+
+def _np_bool(a) -> np.ndarray:
+    if isinstance(a, torch.Tensor):
+        a = a.detach().cpu().numpy()
+    return np.asarray(a, dtype=bool)
+
+
+def render_space_depth(depth: torch.Tensor, kind: str) -> tuple[torch.Tensor, torch.Tensor]:
+    """The rendered depth in the prior's space and where it is usable.
+
+    `disparity` priors are compared with 1 / D (guarded: pixels with D <= DEPTH_EPS are not used and
+    their inverse is computed from a clamped value, so no inf/NaN reaches the graph).
+    """
+    usable = depth > DEPTH_EPS
+    if kind == "disparity":
+        return 1.0 / depth.clamp_min(DEPTH_EPS), usable
+    if kind in ("depth", "metric"):
+        return depth, usable
+    raise ValueError(f"unknown depth prior kind {kind!r} (disparity | depth | metric)")
+
+
+@dataclass
+class DepthTerm:
+    loss: Optional[torch.Tensor]   # None = skipped for this view and iteration
+    reason: str = ""
+    s: float = 1.0
+    t: float = 0.0
+
+
+def depth_loss(formulation: str, depth: torch.Tensor, prior: np.ndarray | torch.Tensor,
+               prior_valid: np.ndarray | torch.Tensor, kind: str, min_valid: int = 10) -> DepthTerm:
+    """L_depth of one view under a formulation; loss=None when skipped (the caller counts skips)."""
+    if formulation not in DEPTH_FORMULATIONS:
+        raise ValueError(f"unknown depth formulation {formulation!r}; choose one of {', '.join(DEPTH_FORMULATIONS)}")
+    if formulation == "none":
+        return DepthTerm(None, "formulation none")
+    r, usable = render_space_depth(depth, kind)
+    p = torch.as_tensor(np.asarray(prior, dtype=np.float32) if not isinstance(prior, torch.Tensor) else prior,
+                        device=depth.device).to(depth.dtype)
+    pv = torch.as_tensor(_np_bool(prior_valid), device=depth.device)
+    m = usable.detach() & pv & torch.isfinite(p)
+    n = int(m.sum())
+    if n < max(2, int(min_valid)):
+        return DepthTerm(None, f"{n} valid pixels (< {min_valid})")
+    rv, pvv = r[m], p[m]
+    if formulation == "raw_l1":
+        return DepthTerm((rv - pvv).abs().mean())
+    if formulation == "scale_shift":
+        st = solve_scale_shift(pvv, rv, None, min_valid)
+        if not st.ok:
+            return DepthTerm(None, st.reason)
+        return DepthTerm((rv - (st.s * pvv + st.t)).abs().mean(), "", st.s, st.t)
+    if formulation == "minmax":
+        pmin, pmax = pvv.min(), pvv.max()
+        if float(pmax - pmin) <= CONSTANT_REL_EPS * max(1.0, float(pmax.abs())):
+            return DepthTerm(None, "prior is (near) constant on the valid pixels")
+        rmin, rmax = rv.min().detach(), rv.max().detach()
+        rn = (rv - rmin) / (rmax - rmin).clamp_min(1e-12)
+        pn = (pvv - pmin) / (pmax - pmin)
+        return DepthTerm((rn - pn).abs().mean())
+    # pearson: 1 - correlation
+    pc = pvv - pvv.mean()
+    pstd = torch.sqrt((pc * pc).mean())
+    if float(pstd) <= CONSTANT_REL_EPS * max(1.0, float(pvv.abs().max())):
+        return DepthTerm(None, "prior is (near) constant on the valid pixels")
+    rc = rv - rv.mean()
+    rstd = torch.sqrt((rc * rc).mean() + 1e-20)
+    corr = (rc * pc).mean() / (rstd * pstd)
+    return DepthTerm(1.0 - corr)
+
+
+def tv_loss(depth: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
+    """Isotropic TV of a (H, W) map: mean over pixels of sqrt(dx^2 + dy^2 + eps) (forward differences)."""
+    if depth.shape[0] < 2 or depth.shape[1] < 2:
+        return depth.sum() * 0.0
+    dx = depth[:-1, 1:] - depth[:-1, :-1]
+    dy = depth[1:, :-1] - depth[:-1, :-1]
+    return torch.sqrt(dx * dx + dy * dy + eps).mean()
+
+
+# ---------------------------------------------------------------------------- semantics
+def sem_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor) -> Optional[torch.Tensor]:
+    """mean |S_hat - S| over pixels with a target (and channels); None when no pixel has one."""
+    if not bool(has_target.any()):
+        return None
+    return (s_hat[has_target] - target[has_target]).abs().mean()
+
+
+def ds_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor, edges: torch.Tensor) -> Optional[torch.Tensor]:
+    """mean |E_d * (S_hat - S)| over pixels with a target; E_d (H, W) in {0, 1}."""
+    if not bool(has_target.any()):
+        return None
+    diff = (s_hat - target).abs() * edges[..., None].to(s_hat.dtype)
+    return diff[has_target].mean()
+
+
+def to_uint8_minmax(values: np.ndarray, valid: np.ndarray) -> Optional[np.ndarray]:
+    """Min-max normalise the valid pixels to 0..255 (invalid -> 0); None if (near) constant."""
+    v = np.asarray(values, dtype=np.float64)
+    m = np.asarray(valid, dtype=bool) & np.isfinite(v)
+    if m.sum() < 2:
+        return None
+    lo, hi = float(v[m].min()), float(v[m].max())
+    if hi - lo <= CONSTANT_REL_EPS * max(1.0, abs(hi), abs(lo)):
+        return None
+    out = np.zeros(v.shape, dtype=np.float64)
+    out[m] = (v[m] - lo) / (hi - lo) * 255.0
+    return np.clip(np.round(out), 0, 255).astype(np.uint8)
+
+
+def depth_edges(values: np.ndarray, valid: np.ndarray, low: float = 50, high: float = 150, dilate: int = 1) -> np.ndarray:
+    """E_d: Canny edges of the depth prior normalised to 8 bits, restricted to valid pixels (bool H x W).
+
+    Edges that only mark the border of the invalid region are removed (valid mask eroded by one pixel
+    before masking). `dilate` = number of 3x3 dilation passes (0 = none).
+    """
+    img = to_uint8_minmax(values, valid)
+    if img is None:
+        return np.zeros(np.asarray(values).shape, dtype=bool)
+    e = cv2.Canny(img, float(low), float(high)) > 0
+    m = np.asarray(valid, dtype=bool)
+    if not m.all():
+        m = cv2.erode(m.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    e &= m
+    if dilate > 0:
+        e = cv2.dilate(e.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=int(dilate)) > 0
+        e &= np.asarray(valid, dtype=bool)
+    return e

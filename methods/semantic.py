@@ -1,0 +1,56 @@
+"""Semantic targets shared by gaussiands and twostage: autoencoder on mask features, per-pixel latents.
+
+S(u, v) = encoder(feature of the mask that covers (u, v)); pixels outside every mask (track id -1)
+have no target and are left out of L_sem and L_ds.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from gsbench.methods.autoencoder import FeatureAutoencoder, train_autoencoder
+
+
+@dataclass
+class SemanticTargets:
+    latents: dict[int, torch.Tensor]     # view id -> (H, W, d)
+    has_target: dict[int, torch.Tensor]  # view id -> (H, W) bool
+
+
+def fit_autoencoder(mask_features: dict, ae_cfg: dict, latent_dim: int, seed: int) -> tuple[FeatureAutoencoder, dict]:
+    """Train the AE on every (view, track) mask feature of the scene (sorted keys: deterministic)."""
+    if not mask_features:
+        raise ValueError("semantic training needs mask features, but the priors produced none")
+    keys = sorted(mask_features)
+    feats = np.stack([np.asarray(mask_features[k], dtype=np.float32).reshape(-1) for k in keys])
+    return train_autoencoder(feats, latent_dim, ae_cfg.get("hidden", (256, 128, 64, 32)),
+                             int(ae_cfg.get("epochs", 200)), float(ae_cfg.get("lr", 1e-3)), seed)
+
+
+def build_targets(masks: dict, mask_features: dict, ae: FeatureAutoencoder, sizes: dict[int, tuple[int, int]]) -> SemanticTargets:
+    """Per-view latent target maps. `sizes`: view id -> (W, H) of the training image."""
+    lat, has = {}, {}
+    for v, (W, H) in sizes.items():
+        m = masks.get(v)
+        d = ae.latent_dim
+        S = torch.zeros(H, W, d)
+        hv = torch.zeros(H, W, dtype=torch.bool)
+        if m is not None:
+            m = np.asarray(m)
+            if m.shape != (H, W):
+                raise ValueError(f"mask of view {v} has shape {m.shape}, expected {(H, W)} (training resolution)")
+            ids = [int(t) for t in np.unique(m) if t >= 0]
+            have = [t for t in ids if (v, t) in mask_features]
+            if have:
+                f = torch.as_tensor(np.stack([np.asarray(mask_features[(v, t)], dtype=np.float32) for t in have]))
+                with torch.no_grad():
+                    z = ae.encode(f)
+                mt = torch.as_tensor(m.astype(np.int64))
+                for j, t in enumerate(have):
+                    sel = mt == t
+                    S[sel] = z[j]
+                    hv |= sel
+        lat[v], has[v] = S, hv
+    return SemanticTargets(lat, has)

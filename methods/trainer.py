@@ -1,0 +1,304 @@
+"""The shared 3DGS trainer used by every method (vanilla, twostage, gaussiands).
+
+Recipe (3DGS, every number a config value under `train`): Adam with one group per tensor
+(position LR times the scene extent with exponential decay; colour, opacity, scaling, rotation,
+semantic LRs), L_rec = (1 - lambda) L1 + lambda (1 - SSIM), adaptive density control (clone /
+split / prune, opacity reset), initialisation from the scene's sparse points or uniformly at random
+in a cube around the cameras' centroid.
+
+The method supplies extra loss terms through `loss_fn(view_id, out, gt_rgb) -> LossResult`.
+Runs are seeded (view order, split sampling, init) and resumable: `checkpoint.pt` in the run folder
+holds parameters, Adam state, densification statistics, RNG states, step and elapsed time; on resume
+`train_log.jsonl` is cut back to the checkpoint's step so the log has no duplicated steps.
+A non-finite loss or parameter writes status "nonfinite" and raises NonFiniteError; the last good
+checkpoint is kept.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from gsbench.errors import NonFiniteError
+from gsbench.gaussians import SH_C0, GaussianField
+from gsbench.render import RenderOutput, render
+from gsbench.scene import Camera
+from gsbench.store import append_jsonl, load_torch, read_jsonl, save_torch_atomic, write_json_atomic, write_text_atomic
+
+from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
+from gsbench.methods.losses import reconstruction_loss
+
+CHECKPOINT = "checkpoint.pt"
+TRAIN_LOG = "train_log.jsonl"
+
+LR_KEYS = {"colors": "color", "opacity_logits": "opacity", "log_scales": "scaling", "quats": "rotation", "features": "semantic"}
+
+
+@dataclass
+class LossResult:
+    total: torch.Tensor
+    terms: dict[str, float] = field(default_factory=dict)     # logged values (unweighted terms)
+    skipped: dict[str, int] = field(default_factory=dict)     # counted skips, e.g. {"depth": 1}
+
+
+@dataclass
+class TrainViews:
+    """Training and periodic-evaluation views at the training resolution."""
+
+    cameras: dict[int, Camera]
+    images: dict[int, torch.Tensor]                   # (H, W, 3) float in [0, 1]
+    eval_cameras: dict[int, Camera] = field(default_factory=dict)
+    eval_images: dict[int, torch.Tensor] = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------------------- initialisation
+def init_field(points: Optional[np.ndarray], colors: Optional[np.ndarray], mode: str, num_random: int,
+               centre: np.ndarray, half_size: float, sh_degree: int, feature_dim: int, seed: int) -> tuple[GaussianField, str]:
+    """Initial Gaussians from sparse points (colours if given) or uniform in a cube; returns (field, how)."""
+    rng = np.random.default_rng(seed)
+    if mode == "points":
+        if points is None or len(points) == 0:
+            raise ValueError("train.init.mode=points but the scene has no sparse points")
+        xyz = np.asarray(points, dtype=np.float64)
+        rgb = np.asarray(colors, dtype=np.float64) if colors is not None and len(colors) == len(xyz) else np.full((len(xyz), 3), 0.5)
+        how = f"points ({len(xyz)})"
+    elif mode == "random":
+        n = max(1, int(num_random))
+        xyz = centre[None, :] + (rng.random((n, 3)) * 2.0 - 1.0) * half_size
+        rgb = rng.random((n, 3))
+        how = f"random ({n} in a cube of half-size {half_size:.4g})"
+    else:
+        raise ValueError(f"train.init.mode must be points or random here, got {mode!r}")
+    n = len(xyz)
+    # scale = sqrt(mean squared distance to the 3 nearest neighbours) (3DGS)
+    from scipy.spatial import cKDTree
+    k = min(4, n)
+    if k >= 2:
+        d, _ = cKDTree(xyz).query(xyz, k=k)
+        d2 = np.mean(d[:, 1:] ** 2, axis=1)
+        pos = d2[d2 > 0]
+        floor = float(np.median(pos)) * 1e-4 if pos.size else 1e-7
+        d2 = np.maximum(d2, max(floor, 1e-14))
+    else:
+        d2 = np.full(n, (half_size * 0.01) ** 2 if half_size > 0 else 1e-4)
+    log_s = np.log(np.sqrt(d2))[:, None].repeat(3, 1)
+    K = (sh_degree + 1) ** 2
+    sh = np.zeros((n, K, 3))
+    sh[:, 0, :] = (np.clip(rgb, 0, 1) - 0.5) / SH_C0
+    quats = np.zeros((n, 4))
+    quats[:, 0] = 1.0
+    f32 = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
+    feats = None
+    if feature_dim > 0:
+        feats = torch.zeros(n, feature_dim)
+    field_ = GaussianField(f32(xyz), f32(log_s), f32(quats), inverse_sigmoid(torch.full((n,), 0.1)), f32(sh), feats)
+    return field_, how
+
+
+def field_from_params(ps: ParamSet) -> GaussianField:
+    p = ps.params
+    return GaussianField(p["means"], p["log_scales"], p["quats"], p["opacity_logits"], p["colors"], p.get("features"))
+
+
+# ---------------------------------------------------------------------------- trainer
+class Trainer:
+    """One optimisation phase (e.g. `main`, or twostage's `rgb` / `semantic`)."""
+
+    def __init__(self, cfg: dict, views: TrainViews, extent: float, field: GaussianField, run_dir: Path,
+                 loss_fn: Callable[[int, RenderOutput, torch.Tensor], LossResult], *, phase: str = "main",
+                 iterations: Optional[int] = None, trainable: Optional[set[str]] = None, densify: bool = True,
+                 backend: str = "torch", seed: int = 0, extra_state: Optional[Callable[[], dict]] = None,
+                 eval_fn: Optional[Callable[[GaussianField], dict]] = None) -> None:
+        self.cfg = cfg
+        self.tcfg = cfg["train"]
+        self.views = views
+        self.extent = float(extent) if extent and extent > 0 else 1.0
+        self.run_dir = Path(run_dir)
+        self.loss_fn = loss_fn
+        self.phase = phase
+        self.iterations = int(self.tcfg["iterations"] if iterations is None else iterations)
+        self.densify = bool(densify and self.tcfg["densify"]["enabled"])
+        self.backend = backend
+        self.seed = int(seed)
+        self.extra_state = extra_state
+        self.eval_fn = eval_fn
+        lr = self.tcfg["lr"]
+        lrs = {"means": lr["position_init"] * self.extent}
+        for k, key in LR_KEYS.items():
+            lrs[k] = lr[key]
+        tensors = {k: v for k, v in field.tensors().items() if v is not None}
+        self.ps = ParamSet(tensors, lrs, trainable)
+        self.stats = DensifyStats(self.ps.num)
+        self.step = 0
+        self.elapsed = 0.0
+        self.view_rng = np.random.default_rng(self.seed)
+        self.view_stack: list[int] = []
+        self.torch_gen = torch.Generator().manual_seed(self.seed + 1)
+        bg = self.tcfg.get("background") or [0.0, 0.0, 0.0]
+        self.background = torch.tensor(bg, dtype=torch.float32)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def field(self) -> GaussianField:
+        return field_from_params(self.ps).detach()
+
+    def state(self) -> dict:
+        return {"phase": self.phase, "step": self.step, "elapsed_s": self.elapsed,
+                "params": {k: v.data.cpu() for k, v in self.ps.params.items()},
+                "optimizer": self.ps.optimizer.state_dict(), "densify": self.stats.state_dict(),
+                "view_rng": self.view_rng.bit_generator.state, "view_stack": list(self.view_stack),
+                "torch_gen": self.torch_gen.get_state(), "torch_rng": torch.get_rng_state(),
+                "extra": self.extra_state() if self.extra_state else {}}
+
+    def load_state(self, st: dict) -> None:
+        if st.get("phase") != self.phase:
+            raise ValueError(f"checkpoint phase {st.get('phase')!r} != {self.phase!r}")
+        lrs = {g["name"]: g["lr"] for g in self.ps.optimizer.param_groups}
+        trainable = {g["name"] for g in self.ps.optimizer.param_groups}
+        self.ps = ParamSet(st["params"], {k: lrs.get(k, 0.0) for k in st["params"]}, trainable)
+        self.ps.optimizer.load_state_dict(st["optimizer"])
+        self.stats.load_state_dict(st["densify"])
+        self.step = int(st["step"])
+        self.elapsed = float(st["elapsed_s"])
+        self.view_rng.bit_generator.state = st["view_rng"]
+        self.view_stack = list(st["view_stack"])
+        self.torch_gen.set_state(st["torch_gen"])
+        torch.set_rng_state(st["torch_rng"])
+
+    def save_checkpoint(self) -> None:
+        save_torch_atomic(self.run_dir / CHECKPOINT, self.state())
+
+    # ------------------------------------------------------------------ schedule
+    def _next_view(self) -> int:
+        if not self.view_stack:
+            ids = sorted(self.views.cameras)
+            self.view_stack = [int(i) for i in self.view_rng.permutation(ids)]
+        return self.view_stack.pop()
+
+    def _update_lr(self) -> float:
+        lr = self.tcfg["lr"]
+        v = expon_lr(self.step, lr["position_init"] * self.extent, lr["position_final"] * self.extent,
+                     int(lr["position_max_steps"]), int(lr.get("position_delay_steps", 0) or 0), float(lr["position_delay_mult"]))
+        g = self.ps.group("means")
+        if g is not None:
+            g["lr"] = v
+        return v
+
+    def _check_finite(self, what: str, value: torch.Tensor | None = None) -> None:
+        if value is not None:
+            if not bool(torch.isfinite(value).all()):
+                raise NonFiniteError(f"non-finite {what} at step {self.step} (phase {self.phase}); "
+                                     f"the last good checkpoint is kept in {self.run_dir / CHECKPOINT}")
+            return
+        for k, p in self.ps.params.items():
+            if not bool(torch.isfinite(p.data).all()):
+                raise NonFiniteError(f"non-finite parameter {k!r} at step {self.step} (phase {self.phase}); "
+                                     f"the last good checkpoint is kept in {self.run_dir / CHECKPOINT}")
+
+    # ------------------------------------------------------------------ loop
+    def run(self, progress: bool = True, resume_state: Optional[dict] = None) -> GaussianField:
+        log_path = self.run_dir / TRAIN_LOG
+        if resume_state is not None:
+            self.load_state(resume_state)
+            # drop log lines written after the checkpoint (they will be produced again)
+            lines = [r for r in read_jsonl(log_path)
+                     if r.get("phase") != self.phase or int(r.get("step", 0)) <= self.step]
+            import json
+            write_text_atomic(log_path, "".join(json.dumps(r) + "\n" for r in lines))
+        d = self.tcfg["densify"]
+        log_every = max(1, int(self.tcfg["log_every"]))
+        eval_every = int(self.tcfg.get("eval_every") or 0)
+        ckpt_every = int(self.tcfg.get("checkpoint_every") or 0)
+        acc: dict[str, float] = {}
+        acc_n = 0
+        skipped: dict[str, int] = {}
+        bar = tqdm(total=self.iterations, initial=self.step, desc=f"train[{self.phase}]", disable=not progress,
+                   dynamic_ncols=True, leave=False)
+        while self.step < self.iterations:
+            t0 = time.perf_counter()
+            self.step += 1
+            lr_pos = self._update_lr()
+            vid = self._next_view()
+            cam = self.views.cameras[vid]
+            gt = self.views.images[vid]
+            fld = field_from_params(self.ps)
+            out = render(fld, cam, backend=self.backend, background=self.background)
+            res = self.loss_fn(vid, out, gt)
+            self._check_finite("loss", res.total.detach())
+            self.ps.optimizer.zero_grad(set_to_none=True)
+            res.total.backward()
+            with torch.no_grad():
+                do_stats = self.densify and self.step < int(d["until_iter"])
+                if do_stats and out.radii is not None:
+                    self.stats.update(out.means2d.grad if out.means2d is not None else None, out.radii, cam.width, cam.height)
+                self.ps.optimizer.step()
+                self._check_finite("parameters")
+                info = {}
+                if self.densify and self.step < int(d["until_iter"]):
+                    if self.step > int(d["from_iter"]) and self.step % int(d["interval"]) == 0:
+                        reset_int = int(d["opacity_reset_interval"])
+                        info = densify_and_prune(self.ps, self.stats, d, self.extent,
+                                                 prune_big=self.step > reset_int, generator=self.torch_gen)
+                    if int(d["opacity_reset_interval"]) > 0 and self.step % int(d["opacity_reset_interval"]) == 0:
+                        reset_opacity(self.ps)
+                        info["opacity_reset"] = True
+            self.elapsed += time.perf_counter() - t0
+            for k, v in res.terms.items():
+                acc[k] = acc.get(k, 0.0) + float(v)
+            acc_n += 1
+            for k, v in res.skipped.items():
+                skipped[k] = skipped.get(k, 0) + int(v)
+            bar.update(1)
+            if self.step % log_every == 0 or self.step == self.iterations or info:
+                rec = {"phase": self.phase, "step": self.step, "wall_s": round(self.elapsed, 4),
+                       "loss": {k: v / max(1, acc_n) for k, v in acc.items()}, "n_gaussians": self.ps.num,
+                       "lr_position": lr_pos, "skipped": dict(skipped)}
+                if info:
+                    rec["densify"] = info
+                append_jsonl(log_path, rec)
+                if "total" in acc:
+                    bar.set_postfix(loss=f"{acc['total'] / max(1, acc_n):.4f}", n=self.ps.num)
+                acc, acc_n, skipped = {}, 0, {}
+            if self.eval_fn is not None and eval_every > 0 and (self.step % eval_every == 0 or self.step == self.iterations):
+                ev = self.eval_fn(self.field)
+                append_jsonl(log_path, {"phase": self.phase, "step": self.step, "wall_s": round(self.elapsed, 4), "eval": ev})
+            if ckpt_every > 0 and (self.step % ckpt_every == 0) and self.step < self.iterations:
+                self.save_checkpoint()
+        bar.close()
+        self.save_checkpoint()
+        return self.field
+
+
+def periodic_eval(views: TrainViews, backend: str, background: torch.Tensor) -> Callable[[GaussianField], dict]:
+    """PSNR / SSIM (gsbench.metrics) on the held-out views listed in `views.eval_cameras`."""
+
+    def _eval(fld: GaussianField) -> dict:
+        if not views.eval_cameras:
+            return {"skipped": "no test views"}
+        from gsbench.metrics import psnr, ssim
+        ps, ss = [], []
+        with torch.no_grad():
+            for i, cam in views.eval_cameras.items():
+                out = render(fld, cam, backend=backend, background=background)
+                pred = out.rgb.clamp(0, 1).cpu().numpy()
+                gt = views.eval_images[i].cpu().numpy()
+                ps.append(psnr(pred, gt))
+                ss.append(ssim(pred, gt))
+        return {"psnr": float(np.mean(ps)), "ssim": float(np.mean(ss)), "n_views": len(ps)}
+
+    return _eval
+
+
+def load_checkpoint_if_any(run_dir: Path) -> Optional[dict]:
+    p = Path(run_dir) / CHECKPOINT
+    return load_torch(p) if p.exists() else None
+
+
+__all__ = ["Trainer", "TrainViews", "LossResult", "init_field", "periodic_eval", "load_checkpoint_if_any",
+           "reconstruction_loss", "CHECKPOINT", "TRAIN_LOG", "math"]

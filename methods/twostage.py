@@ -1,0 +1,81 @@
+"""`twostage`: the decoupled paradigm the paper argues against.
+
+Stage 1 (`rgb`): RGB-only 3DGS (as `vanilla`, `train.iterations`). Stage 2 (`semantic`): geometry and
+colour frozen, no densification; only the per-Gaussian latents are optimised with L_sem for
+`twostage.semantic_iterations`, from per-frame (unpropagated) masks: ids are not consistent across
+views, so each view's target comes from that view's own mask features only.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from gsbench.methods.base import Method, load_views, scene_init
+from gsbench.methods.common import fit_priors, resolve_render_backend, run_trainer, uses
+from gsbench.methods.losses import sem_loss
+from gsbench.methods.semantic import build_targets, fit_autoencoder
+from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
+from gsbench.methods.vanilla import rgb_loss_fn
+
+
+class TwoStage(Method):
+    name = "twostage"
+
+    def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
+        run_dir = Path(run_dir)
+        self.config = config
+        self._backend = resolve_render_backend(config)
+        views, (W, H) = load_views(scene, config)
+        train_ids = sorted(views.cameras)
+        ckpt = load_checkpoint_if_any(run_dir)
+        # ---- stage 1: RGB
+        field0, how = scene_init(scene, config, 0)
+        self.info["init"] = how
+        if ckpt is not None and ckpt.get("phase") == "semantic":
+            rgb_field = None                      # stage 1 finished before the interruption
+        else:
+            rgb_field = run_trainer(config, views, scene, field0, run_dir, rgb_loss_fn(float(config["train"]["lambda_dssim"])),
+                                    phase="rgb", backend=self._backend, progress=progress, resume=ckpt)
+        if not uses(config)["semantics"]:
+            self.field = rgb_field
+            self.info["n_gaussians"] = self.field.num
+            return
+        # ---- stage 2: semantics from per-frame masks on frozen geometry
+        g = config["gaussiands"]
+        d = int(g["latent_dim"])
+        pri = fit_priors(scene, config, run_dir, train_ids, (W, H), need_depth=False, need_sem=True,
+                         per_frame=True, progress=progress)
+        self.providers = dict(pri.providers)
+        self.info["priors_stats"] = dict(pri.stats)
+        if pri.masks is None or pri.mask_features is None:
+            raise ValueError(f"twostage: the priors gave no masks/features ({pri.skipped})")
+        ae, ae_stats = fit_autoencoder(pri.mask_features, g["autoencoder"], d, int(config["seed"]))
+        ae_state = (ckpt or {}).get("extra", {}).get("autoencoder") if (ckpt or {}).get("phase") == "semantic" else None
+        if ae_state is not None:
+            ae.load_state_dict(ae_state)
+        self.autoencoder = ae
+        self.info["autoencoder"] = ae_stats
+        targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids})
+        if rgb_field is None:
+            p = ckpt["params"]
+            from gsbench.gaussians import GaussianField
+            sem_field0 = GaussianField(p["means"], p["log_scales"], p["quats"], p["opacity_logits"], p["colors"], p["features"])
+        else:
+            sem_field0 = rgb_field.with_features(torch.zeros(rgb_field.num, d))
+
+        def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
+            ls = sem_loss(out.features, targets.latents[vid], targets.has_target[vid])
+            if ls is None:
+                z = out.features.sum() * 0.0
+                return LossResult(z, {"total": 0.0}, {"sem": 1})
+            v = float(ls.detach())
+            return LossResult(ls, {"sem": v, "total": v})
+
+        self.field = run_trainer(config, views, scene, sem_field0, run_dir, loss_fn, phase="semantic",
+                                 backend=self._backend, progress=progress,
+                                 resume=ckpt if (ckpt or {}).get("phase") == "semantic" else None,
+                                 iterations=int(config["twostage"]["semantic_iterations"]),
+                                 trainable={"features"}, densify=False,
+                                 extra_state=lambda: {"autoencoder": self.autoencoder.state_dict()})
+        self.info["n_gaussians"] = self.field.num

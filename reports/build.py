@@ -1,0 +1,190 @@
+"""Write the whole report: collected table, Markdown + LaTeX tables, PNG plots, index.html.
+
+Inputs are only the collected long table (gsbench.collect) and, for the time curves, the
+train_log.jsonl of the runs it lists.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from gsbench.collect import collect, read_collected, write_collected
+from gsbench.errors import InputError
+from gsbench.reports import html as html_mod
+from gsbench.reports import plots
+from gsbench.reports.data import MAIN_STUDIES, Results, is_null
+from gsbench.reports.spec import STUDIES
+from gsbench.reports.studies import build_tables
+from gsbench.reports.table import Table
+from gsbench.store import write_text_atomic
+
+# table id prefix -> section (study) it belongs to
+_SECTION_OF = [
+    ("reconstruction", "main"), ("lerf_", "main"), ("3dovs_", "main"), ("removal", "main"),
+    ("ordering", "ordering"), ("depth_formulation", "depth_formulation"), ("loss_subsets", "loss_subsets"),
+    ("latent_dim", "latent_dim"), ("lambda_", "lambda_grid"), ("depth_noise", "depth_noise"),
+]
+_SECTION_TITLES = {"main": "Main results (reconstruction and segmentation)", **{k: v for k, v in STUDIES.items() if k != "reconstruction"}}
+_NO_BARS = ("latent_dim", "lambda_pearson")
+
+
+@dataclass
+class ReportSummary:
+    out_dir: Path
+    index: Path
+    tables: list[str] = field(default_factory=list)
+    plots: list[Path] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    collected: Path | None = None
+
+
+def _writer_version() -> str:
+    try:
+        from importlib.metadata import version
+        return version("gsbench")
+    except Exception:  # not installed as a distribution
+        return "unknown"
+
+
+def load_results(source: str | Path) -> tuple[pd.DataFrame, str]:
+    """A runs folder is collected now; a collected.parquet / .csv file is read as is."""
+    source = Path(source)
+    if source.is_file():
+        return read_collected(source), str(source)
+    if not source.exists():
+        raise FileNotFoundError(f"{source}: runs folder not found")
+    return collect(source), str(source)
+
+
+def _section_of(table_id: str) -> str:
+    for prefix, sec in _SECTION_OF:
+        if table_id.startswith(prefix):
+            return sec
+    return "main"
+
+
+def build_report(source: str | Path, out_dir: str | Path, progress: bool = False) -> ReportSummary:
+    """Build the report for a runs folder (or a collected table) into out_dir."""
+    out_dir = Path(out_dir)
+    df, src = load_results(source)
+    if df.empty:
+        raise InputError(f"{source}: no results to report")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    plot_dir = out_dir / "plots"
+    table_dir = out_dir / "tables"
+    plot_dir.mkdir(exist_ok=True)
+    table_dir.mkdir(exist_ok=True)
+    summary = ReportSummary(out_dir=out_dir, index=out_dir / "index.html")
+    summary.notes += list(df.attrs.get("warnings", []))
+    summary.collected = write_collected(df, out_dir)
+
+    res = Results(df)
+    tables = build_tables(res)
+    summary.tables = [t.id for t in tables]
+    _write_tables(tables, table_dir, out_dir)
+
+    sections: dict[str, html_mod.Section] = {}
+
+    def section(key: str) -> html_mod.Section:
+        if key not in sections:
+            sections[key] = html_mod.Section(key, _SECTION_TITLES.get(key, key))
+        return sections[key]
+
+    steps = list(tables)
+    it: Any = steps
+    if progress:
+        from tqdm import tqdm
+        it = tqdm(steps, desc="report tables/plots", unit="table")
+    for t in it:
+        sec = section(_section_of(t.id))
+        sec.tables.append(t)
+        if not t.id.startswith(_NO_BARS):
+            p = plots.plot_table_bars(t, plot_dir / f"bars_{t.id}.png")
+            if p:
+                summary.plots.append(p)
+                sec.figures.append((p.relative_to(out_dir).as_posix(), f"{t.title}: bars per row; error bars = std over seeds."))
+
+    # error against run time, one figure per study
+    studies = res.studies()
+    groups: list[tuple[str, Any, list[str]]] = []
+    main_ids = res.run_ids(study=MAIN_STUDIES)
+    if main_ids:
+        groups.append(("main", None, main_ids))
+    for st in sorted(s for s in studies if s not in MAIN_STUDIES):
+        groups.append((st if st in STUDIES else f"other_{st}", st, res.run_ids(study=st)))
+    for key, st, ids in groups:
+        p, notes = plots.plot_time_curves(res, st if key != "main" else None, ids, plot_dir / f"time_{_slug(key)}.png")
+        sec = section(key)
+        if key.startswith("other_"):
+            sec.title = f"Runs of study '{st}' (no table layout for this study)"
+        sec.notes += notes
+        if p:
+            summary.plots.append(p)
+            sec.figures.append((p.relative_to(out_dir).as_posix(),
+                                "Error against run time: PSNR / mIoU of the periodic evaluations (train_log.jsonl) "
+                                "over wall time; dots are final results vs total training time; dashed red = Pareto front."))
+        else:
+            sec.notes.append("No time curve: the runs have neither periodic evaluations nor final values with a training time.")
+
+    for p in plots.plot_lambda_surfaces(res, plot_dir / "lambda_surfaces"):
+        summary.plots.append(p)
+        section("lambda_grid").figures.append((p.relative_to(out_dir).as_posix(),
+                                               "Lambda response surfaces: mean mIoU per pair of lambdas (others averaged), "
+                                               "Pearson r of each lambda with mIoU in the axis labels."))
+    for p in plots.plot_noise(res, plot_dir / "noise"):
+        summary.plots.append(p)
+        section("depth_noise").figures.append((p.relative_to(out_dir).as_posix(),
+                                               "Metric vs depth-noise severity per perturbation kind (severity 0 = clean run)."))
+    for p in plots.plot_latent(res, plot_dir / "latent_dim"):
+        summary.plots.append(p)
+        section("latent_dim").figures.append((p.relative_to(out_dir).as_posix(),
+                                              "Latent-d trade-off: accuracy against cost; dashed = reference method."))
+
+    # what is absent
+    absent = []
+    if not main_ids:
+        absent.append("main results (standalone / reconstruction runs)")
+    for st in STUDIES:
+        if st != "reconstruction" and st not in studies:
+            absent.append(st)
+    if absent:
+        summary.notes.append("No runs for: " + ", ".join(absent) + " (their tables and plots are left out).")
+    if main_ids and not any(t.startswith(("reconstruction", "lerf_", "3dovs_")) for t in summary.tables):
+        summary.notes.append("Main runs exist but carry none of the reconstruction / segmentation metrics.")
+    unknown = sorted(s for s in studies if s not in MAIN_STUDIES and s not in STUDIES)
+    if unknown:
+        summary.notes.append("Studies without a table layout (time curves only): " + ", ".join(map(str, unknown)) + ".")
+    for t in tables:
+        summary.notes += [f"{t.title}: {n}" for n in t.notes]
+
+    order = ["main"] + [k for k in STUDIES if k != "reconstruction"]
+    ordered = [sections[k] for k in order if k in sections] + [s for k, s in sections.items() if k not in order]
+    links = [("tables.md", "tables (Markdown)"), ("tables.tex", "tables (LaTeX)"),
+             (summary.collected.name, f"collected results ({summary.collected.suffix[1:]})")]
+    generated = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    html_mod.write_index(summary.index, "gsbench report", src, generated, ordered, summary.notes, res, links,
+                         _writer_version())
+    return summary
+
+
+def _write_tables(tables: list[Table], table_dir: Path, out_dir: Path) -> None:
+    md, tex = ["# gsbench tables", ""], [
+        "% gsbench tables. Needs \\usepackage{booktabs,graphicx,amssymb} (amssymb for \\checkmark).", ""]
+    for t in tables:
+        m, x = t.to_markdown(), t.to_latex()
+        write_text_atomic(table_dir / f"{t.id}.md", m)
+        write_text_atomic(table_dir / f"{t.id}.tex", x)
+        md += [m, ""]
+        tex += [x, ""]
+    if not tables:
+        md.append("No table has data.")
+    write_text_atomic(out_dir / "tables.md", "\n".join(md))
+    write_text_atomic(out_dir / "tables.tex", "\n".join(tex))
+
+
+def _slug(s: Any) -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in str(s)) if not is_null(s) else "none"

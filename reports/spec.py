@@ -1,0 +1,115 @@
+"""What the report knows about metrics and studies: display names, units, which direction is
+better, how many decimals. One place, so tables, plots and the HTML agree.
+
+Metric names and study / axis keys are the ones defined in gsbench/store.py.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class MetricSpec:
+    label: str            # plain text (Markdown / HTML / plots)
+    latex: str            # LaTeX header text
+    better: str | None    # "higher" | "lower" | None (no best marked)
+    scale: float = 1.0    # display value = stored value * scale (fractions shown as %)
+    decimals: int = 2
+
+
+def _pct(label: str, better: str = "higher") -> MetricSpec:
+    return MetricSpec(f"{label} (%)", f"{label} (\\%)", better, 100.0, 2)
+
+
+METRICS: dict[str, MetricSpec] = {
+    "psnr": MetricSpec("PSNR (dB)", "PSNR (dB)", "higher", 1.0, 2),
+    "ssim": MetricSpec("SSIM", "SSIM", "higher", 1.0, 3),
+    "lpips": MetricSpec("LPIPS", "LPIPS", "lower", 1.0, 3),
+    "fps": MetricSpec("FPS", "FPS", "higher", 1.0, 1),
+    "miou_3dovs": _pct("mIoU"),
+    "mbiou_3dovs": _pct("mBIoU"),
+    "pixel_acc_3dovs": _pct("Pixel acc."),
+    "miou_3dovs_encode": _pct("mIoU encode"),
+    "miou_3dovs_decode": _pct("mIoU decode"),
+    "mbiou_3dovs_encode": _pct("mBIoU encode"),
+    "mbiou_3dovs_decode": _pct("mBIoU decode"),
+    "miou_lerf": _pct("mIoU"),
+    "loc_acc_lerf": _pct("Loc. acc."),
+    "miou_lerf_encode": _pct("mIoU encode"),
+    "miou_lerf_decode": _pct("mIoU decode"),
+    "removal_residual": MetricSpec("Residual object px (%)", "Residual object px (\\%)", "lower", 100.0, 2),
+    "removal_psnr_outside": MetricSpec("PSNR outside (dB)", "PSNR outside (dB)", "higher", 1.0, 2),
+    "ordering_adjacent_distance": MetricSpec("Adjacent pose distance", "Adjacent Pose Distance", "lower", 1.0, 3),
+    "ordering_adjacent_mask_iou": _pct("Adjacent mask IoU"),
+    # timings / memory (rows of the long table with source "timings" / "memory")
+    "train_s": MetricSpec("Training time (min)", "Training Time (min)", "lower", 1.0 / 60.0, 2),
+    "eval_s": MetricSpec("Eval time (s)", "Eval Time (s)", "lower", 1.0, 1),
+    "render_ms": MetricSpec("Render time (ms)", "Render Time (ms)", "lower", 1.0, 2),
+    "peak_rss_mb": MetricSpec("Peak RSS memory (MB)", "Peak RSS (MB)", "lower", 1.0, 0),
+    "train_peak_rss_mb": MetricSpec("Peak RSS memory (MB)", "Peak RSS (MB)", "lower", 1.0, 0),
+    "peak_cuda_mb": MetricSpec("Peak CUDA memory (MB)", "Peak VRAM (MB)", "lower", 1.0, 0),
+    "train_peak_cuda_mb": MetricSpec("Peak CUDA memory (MB)", "Peak VRAM (MB)", "lower", 1.0, 0),
+}
+KNOWN_METRICS = set(METRICS)
+
+# Logical metric -> concrete metric name per protocol ("mIoU" of a 3D-OVS scene is miou_3dovs).
+LOGICAL = {
+    "miou": {"3dovs": "miou_3dovs", "lerf": "miou_lerf"},
+    "mbiou": {"3dovs": "mbiou_3dovs"},
+}
+LOGICAL_SPEC = {
+    "miou": _pct("mIoU"),
+    "mbiou": _pct("mBIoU"),
+}
+
+PROTOCOL_LABELS = {"3dovs": "3D-OVS protocol", "lerf": "LERF-OVS protocol", None: "no semantic protocol"}
+METHOD_LABELS = {"vanilla": "3DGS (vanilla)", "twostage": "Two-stage", "gaussiands": "GaussianDS"}
+METHOD_ORDER = ["vanilla", "twostage", "gaussiands"]
+
+STUDIES = {
+    "reconstruction": "Reconstruction and segmentation per scene (Tables I-III)",
+    "ordering": "Pseudo-video ordering",
+    "depth_formulation": "Depth supervision formulation",
+    "loss_subsets": "Loss subsets",
+    "latent_dim": "Latent dimension d",
+    "lambda_grid": "Lambda grid (hyper-parameter sensitivity)",
+    "depth_noise": "Depth-noise robustness",
+}
+
+AX_ORDERING = "axis.priors.ordering"
+AX_FORMULATION = "axis.gaussiands.depth_formulation"
+AX_LOSSES = ["axis.gaussiands.losses.depth", "axis.gaussiands.losses.tv", "axis.gaussiands.losses.ds"]
+AX_LATENT = "axis.gaussiands.latent_dim"
+AX_LAMBDAS = ["axis.gaussiands.lambdas.depth", "axis.gaussiands.lambdas.tv",
+              "axis.gaussiands.lambdas.sem", "axis.gaussiands.lambdas.ds"]
+AX_NOISE_TYPE = "axis.priors.depth.noise.type"
+AX_NOISE_SEVERITY = "axis.priors.depth.noise.severity"
+
+ORDERING_LABELS = {"random": "Random", "filename": "Filename order", "pose": "Pose-nearest"}
+ORDERING_ORDER = ["random", "filename", "pose"]
+FORMULATION_LABELS = {
+    "none": "No depth loss", "raw_l1": "Raw L1 supervision", "minmax": "Min-max normalized depth",
+    "scale_shift": "Scale-shift aligned depth", "pearson": "Pearson correlation",
+}
+FORMULATION_ORDER = ["none", "raw_l1", "minmax", "scale_shift", "pearson"]
+NOISE_LABELS = {"gaussian": "Gaussian", "poisson": "Poisson", "motion_blur": "Motion blur",
+                "salt_pepper": "Salt-and-pepper"}
+NOISE_ORDER = ["gaussian", "poisson", "motion_blur", "salt_pepper"]
+# Paper order of the loss subsets (depth, tv, ds); the paper omits (tv, ds), listed here before "all".
+LOSS_SUBSET_ORDER = [
+    (False, False, False), (True, False, False), (False, True, False), (False, False, True),
+    (True, True, False), (True, False, True), (False, True, True), (True, True, True),
+]
+
+
+def method_label(method: str) -> str:
+    return METHOD_LABELS.get(method, method)
+
+
+def metric_spec(name: str) -> MetricSpec:
+    """Spec of a metric; unknown metrics get a neutral spec (no best marked)."""
+    if name in METRICS:
+        return METRICS[name]
+    if name in LOGICAL_SPEC:
+        return LOGICAL_SPEC[name]
+    return MetricSpec(name, name.replace("_", "\\_"), None, 1.0, 3)

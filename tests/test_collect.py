@@ -1,0 +1,162 @@
+"""gsbench collect: results.json files (hand-written, no training) -> one long table."""
+from __future__ import annotations
+
+import builtins
+import json
+import math
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from gsbench.cli import main
+from gsbench.collect import (
+    BASE_COLUMNS, collect, missing_reason, read_collected, write_collected,
+)
+from gsbench.errors import InputError
+from test_report_synthetic import make_ablations, make_main, write_run
+
+INTERFACE = BASE_COLUMNS + ["metric", "value", "metric_impl"]
+
+
+@pytest.fixture()
+def runs(tmp_path: Path) -> Path:
+    root = tmp_path / "runs"
+    make_main(root)
+    make_ablations(root)
+    return root
+
+
+def _v(df: pd.DataFrame, run: str, metric: str) -> pd.Series:
+    sel = df[(df["run_id"] == f"id-{run}") & (df["metric"] == metric)]
+    assert len(sel) == 1, (run, metric, len(sel))
+    return sel.iloc[0]
+
+
+def test_long_table_columns_rows_and_values(runs: Path):
+    df = collect(runs)
+    for c in INTERFACE:
+        assert c in df.columns
+    assert df["run_id"].nunique() == 8 + 8 + 5 + 3 + 4
+    # vanilla on bench: 5 metrics + train_s (timings) + peak_rss_mb (memory) = 7 rows
+    assert (df["run_id"] == "id-main/vanilla_bench").sum() == 7
+    r = _v(df, "main/gds_bench_s1", "psnr")
+    assert r["value"] == 26.0 and r["seed"] == 1 and r["method"] == "gaussiands" and r["scene"] == "bench"
+    assert r["protocol"] == "3dovs" and r["backend"] == "torch" and r["provider.masks"] == "simulated-flow"
+    assert r["metric_impl"] == "gsbench.psnr.uint8.v1"
+    assert r["run_dir"] == str(runs / "main" / "gds_bench_s1")
+    t = _v(df, "main/gds_bench_s1", "train_s")
+    assert t["value"] == 120.0 and t["source"] == "timings"
+    assert _v(df, "lat/d8", "peak_rss_mb")["value"] == 600.0
+
+
+def test_missing_values_are_nan_with_reason(runs: Path):
+    df = collect(runs)
+    lp = _v(df, "main/vanilla_bench", "lpips")
+    assert math.isnan(lp["value"]) and lp["reason"] == "no LPIPS weights"
+    mi = _v(df, "main/vanilla_bench", "miou_3dovs")
+    assert math.isnan(mi["value"]) and mi["reason"] == "method has no semantic field"
+    assert _v(df, "main/vanilla_bench", "psnr")["reason"] is None
+
+
+def test_axis_columns_are_typed(runs: Path):
+    df = collect(runs)
+    assert str(df["axis.gaussiands.losses.depth"].dtype) == "boolean"
+    assert df["axis.gaussiands.latent_dim"].dtype == "float64"
+    assert _v(df, "lat/d16", "psnr")["axis.gaussiands.latent_dim"] == 16.0
+    assert _v(df, "ord/pose", "psnr")["axis.priors.ordering"] == "pose"
+    # runs outside a study have no axis value
+    assert pd.isna(_v(df, "main/gds_sofa", "psnr")["axis.priors.ordering"])
+    assert _v(df, "loss/101", "psnr")["axis.gaussiands.losses.tv"] == False  # noqa: E712
+
+
+def test_parquet_round_trip(runs: Path):
+    df = collect(runs)
+    out = write_collected(df, runs)
+    assert out.name == "collected.parquet" and out.read_bytes()[:4] == b"PAR1"
+    back = read_collected(out)
+    assert len(back) == len(df)
+    r = back[(back["run_id"] == "id-loss/110") & (back["metric"] == "psnr")].iloc[0]
+    assert r["value"] == 23.0 and r["axis.gaussiands.losses.depth"] == True  # noqa: E712
+    assert r["axis.gaussiands.losses.ds"] == False  # noqa: E712
+
+
+def test_csv_fallback_without_pyarrow(runs: Path, monkeypatch):
+    real_import = builtins.__import__
+
+    def no_pyarrow(name, *a, **k):
+        if name == "pyarrow" or name.startswith("pyarrow."):
+            raise ImportError("no pyarrow (test)")
+        return real_import(name, *a, **k)
+
+    df = collect(runs)
+    monkeypatch.setattr(builtins, "__import__", no_pyarrow)
+    out = write_collected(df, runs)
+    monkeypatch.undo()
+    assert out.name == "collected.csv" and not (runs / "collected.parquet").exists()
+    back = read_collected(out)
+    r = back[(back["run_id"] == "id-lat/d8") & (back["metric"] == "miou_lerf")].iloc[0]
+    assert r["value"] == pytest.approx(0.63) and r["axis.gaussiands.latent_dim"] == 8.0
+    b = back[(back["run_id"] == "id-loss/011") & (back["metric"] == "psnr")].iloc[0]
+    assert b["axis.gaussiands.losses.depth"] == False and b["axis.gaussiands.losses.ds"] == True  # noqa: E712
+    lp = back[(back["run_id"] == "id-main/vanilla_bench") & (back["metric"] == "lpips")].iloc[0]
+    assert math.isnan(lp["value"]) and lp["reason"] == "no LPIPS weights"
+
+
+def test_bad_results_name_the_file(tmp_path: Path):
+    root = tmp_path / "runs"
+    d = write_run(root, "a", method="gaussiands", scene="bench", metrics={"psnr": 20.0})
+    res = json.loads((d / "results.json").read_text())
+    del res["scene"]
+    (d / "results.json").write_text(json.dumps(res))
+    with pytest.raises(InputError, match=r"a/results.json: missing key 'scene'"):
+        collect(root)
+    res["scene"] = "bench"
+    res["metrics"]["psnr"] = "high"
+    (d / "results.json").write_text(json.dumps(res))
+    with pytest.raises(InputError, match=r"results.json: metrics.psnr must be a number"):
+        collect(root)
+    (d / "results.json").write_text('{"run_id": "x", ')
+    with pytest.raises(ValueError, match=r"a/results.json: corrupt or truncated JSON"):
+        collect(root)
+
+
+def test_empty_dir_duplicates_and_hidden(tmp_path: Path):
+    root = tmp_path / "runs"
+    root.mkdir()
+    with pytest.raises(InputError, match="no results.json found"):
+        collect(root)
+    write_run(root, "a", method="vanilla", scene="s", metrics={"psnr": 20.0})
+    write_run(root, "copy_of_a", method="vanilla", scene="s", metrics={"psnr": 20.0})
+    res = json.loads((root / "copy_of_a" / "results.json").read_text())
+    res["run_id"] = "id-a"
+    (root / "copy_of_a" / "results.json").write_text(json.dumps(res))
+    write_run(root, ".cache/x", method="vanilla", scene="s", metrics={"psnr": 1.0})
+    df = collect(root)
+    assert df["run_id"].nunique() == 1 and len(df[df["metric"] == "psnr"]) == 1
+    assert len(df.attrs["warnings"]) == 1 and "duplicate" in df.attrs["warnings"][0]
+
+
+def test_missing_reason_matching():
+    sk = {"lpips": "no LPIPS weights", "3dovs_encode": "no semantic field (encode)",
+          "3dovs_decode": "no semantic field (decode)", "removal": "no removal GT",
+          "lerf_unlabeled_views": "2 views unlabeled"}
+    assert missing_reason("lpips", sk, "done") == "no LPIPS weights"
+    assert missing_reason("miou_3dovs_decode", sk, "done") == "no semantic field (decode)"
+    assert missing_reason("miou_3dovs", sk, "done") == "no semantic field (encode); no semantic field (decode)"
+    assert missing_reason("removal_psnr_outside", sk, "done") == "no removal GT"
+    assert missing_reason("miou_lerf", sk, "done") == "no reason recorded"
+    assert missing_reason("miou_lerf", {"semantics": "vanilla"}, "done") == "vanilla"
+    assert missing_reason("psnr", {}, "failed") == "run failed"
+
+
+def test_cli_collect(runs: Path, capsys):
+    assert main(["collect", str(runs)]) == 0
+    out = capsys.readouterr().out
+    assert "collected 28 runs" in out and "collected.parquet" in out and "standalone" in out
+    assert (runs / "collected.parquet").exists()
+    empty = runs.parent / "empty"
+    empty.mkdir()
+    assert main(["collect", str(empty)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no results.json found" in err

@@ -1,0 +1,56 @@
+"""Executors: results in order, thread budget per worker, submitit local mode."""
+from __future__ import annotations
+
+import math
+import os
+
+import pytest
+
+from gsbench.executors import LocalExecutor, SubmititExecutor, apply_thread_budget, make_executor
+
+
+def worker_info(x: int) -> tuple[int, str, str, int]:
+    import os
+    return x * x, os.environ.get("OMP_NUM_THREADS", ""), os.environ.get("GSBENCH_THREADS", ""), os.getpid()
+
+
+def test_local_pool_keeps_order_and_sets_threads():
+    ex = LocalExecutor(jobs=2, threads=1, progress=False)
+    out = ex.map(worker_info, [3, 1, 2, 5])
+    assert [o[0] for o in out] == [9, 1, 4, 25]
+    assert all(o[1] == "1" and o[2] == "1" for o in out)
+    assert os.getpid() not in {o[3] for o in out}      # ran in worker processes
+
+
+def test_thread_budget_applies_to_torch(monkeypatch):
+    import torch
+    before = torch.get_num_threads()
+    monkeypatch.setenv("GSBENCH_THREADS", "1")
+    try:
+        assert apply_thread_budget() == 1
+        assert torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
+
+
+def test_local_default_thread_budget():
+    ex = LocalExecutor(jobs=2, progress=False)
+    import os
+    cores = len(os.sched_getaffinity(0))
+    assert ex.threads == max(1, cores // 2)
+    with pytest.raises(ValueError):
+        LocalExecutor(jobs=0)
+
+
+def test_submitit_local_mode_job_array(tmp_path):
+    ex = SubmititExecutor(tmp_path / "logs", cluster="local", progress=False, timeout_min=5)
+    out = ex.map(math.factorial, [4, 5])
+    assert out == [24, 120]
+    assert any((tmp_path / "logs").iterdir())          # submitit wrote its job folders
+
+
+def test_make_executor_rejects_unknown():
+    with pytest.raises(ValueError, match="unknown executor"):
+        make_executor("dask")
+    with pytest.raises(ValueError, match="cluster"):
+        SubmititExecutor("x", cluster="pbs")

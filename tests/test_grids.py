@@ -1,0 +1,158 @@
+"""Grid files: parsing, validation against the config tree, expansion, cell status."""
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import time
+
+import pytest
+
+from gsbench import grids
+from gsbench.errors import InputError
+from gsbench.store import write_json_atomic
+
+STUDIES = ["reconstruction", "ordering", "depth_formulation", "loss_subsets", "latent_dim", "lambda_grid",
+           "depth_noise"]
+
+
+def _grid(**kw):
+    raw = {"study": "custom", "base": {"method": "gaussiands", "preset": "cpu-small"},
+           "scenes": ["tabletop-small"], "seeds": [0]}
+    raw.update(kw)
+    return grids.parse_grid(raw, where="g.yaml")
+
+
+@pytest.mark.parametrize("study", STUDIES)
+@pytest.mark.parametrize("scale", ["cpu", "paper"])
+def test_every_study_ships_at_both_scales(study, scale):
+    g = grids.load_grid(f"{study}-{scale}")
+    assert g.study == study
+    assert set(g.axis_keys) <= set(grids.STUDIES[study])
+    assert g.cells()
+
+
+def test_study_cell_counts():
+    ls = grids.load_grid("loss_subsets-cpu")
+    subsets = {(c.overrides["gaussiands.losses.depth"], c.overrides["gaussiands.losses.tv"],
+                c.overrides["gaussiands.losses.ds"]) for c in ls.cells()}
+    assert len(ls.cells()) == 8 and len(subsets) == 8
+    ld = grids.load_grid("latent_dim-paper")
+    dims = sorted(c.overrides["gaussiands.latent_dim"] for c in ld.cells() if c.method == "gaussiands")
+    assert dims == [3, 6, 8, 12, 16, 32]
+    assert [c.method for c in ld.cells()].count("vanilla") == 1
+    dn = grids.load_grid("depth_noise-paper")
+    kinds = {c.overrides.get("priors.depth.noise.type") for c in dn.cells()}
+    assert kinds == {"gaussian", "poisson", "motion_blur", "salt_pepper", None}
+    sev = {c.overrides["priors.depth.noise.severity"] for c in dn.cells()}
+    assert sev == {0, 1, 2, 3, 4, 5}
+    assert len(dn.cells()) == 2 * (4 * 5 + 1)   # two scenes x (4 kinds x 5 severities + clean)
+    rec = grids.load_grid("reconstruction-cpu")
+    assert sorted({c.method for c in rec.cells()}) == ["gaussiands", "twostage", "vanilla"]
+
+
+def test_lambda_sweeps_union_without_duplicate_default():
+    g = grids.load_grid("lambda_grid-cpu")
+    # 3x3 + 3x3 surfaces share the all-default cell (0.01, 5.0) == (1.5, 1.0): 17 distinct cells
+    assert len(g.cells()) == 17
+    assert g.axis_keys == ["gaussiands.lambdas.depth", "gaussiands.lambdas.sem", "gaussiands.lambdas.tv",
+                           "gaussiands.lambdas.ds"]
+
+
+def test_product_and_zip():
+    g = _grid(mode="zip", axes={"gaussiands.latent_dim": [3, 6], "gaussiands.losses.ds": [True, False]},
+              seeds=[0, 1])
+    combos = {(c.seed, c.overrides["gaussiands.latent_dim"], c.overrides["gaussiands.losses.ds"]) for c in g.cells()}
+    assert combos == {(0, 3, True), (0, 6, False), (1, 3, True), (1, 6, False)}
+    g = _grid(axes={"gaussiands.latent_dim": [3, 6], "gaussiands.losses.ds": [True, False]})
+    assert len(g.cells()) == 4
+    assert all(c.overrides["seed"] == 0 for c in g.cells())
+
+
+def test_unknown_axis_key_names_the_closest():
+    with pytest.raises(InputError, match=r"unknown config key 'gaussiands.latent_dims'.*gaussiands.latent_dim"):
+        _grid(axes={"gaussiands.latent_dims": [3, 6]})
+    with pytest.raises(InputError, match="unknown config key 'gaussiands.losses'"):
+        _grid(axes={"gaussiands.losses": [True]})          # a subtree, not a leaf
+
+
+def test_validation_errors():
+    with pytest.raises(InputError, match="zip axes need equal lengths"):
+        _grid(mode="zip", axes={"gaussiands.latent_dim": [3, 6], "gaussiands.losses.ds": [True]})
+    with pytest.raises(InputError, match="must be true/false"):
+        _grid(axes={"gaussiands.losses.ds": ["yes"]})
+    with pytest.raises(InputError, match="must be a number"):
+        _grid(axes={"gaussiands.latent_dim": ["3"]})
+    with pytest.raises(InputError, match="non-empty list"):
+        _grid(axes={"gaussiands.latent_dim": []})
+    with pytest.raises(InputError, match="unknown top-level keys"):
+        _grid(axis={"gaussiands.latent_dim": [3]})
+    with pytest.raises(InputError, match="unknown config preset"):
+        _grid(base={"preset": "gpu-huge"})
+    with pytest.raises(InputError, match="study 'latent_dim' varies"):
+        _grid(study="latent_dim", axes={"gaussiands.losses.ds": [True, False]})
+    with pytest.raises(InputError, match="seeds"):
+        _grid(axes={"seed": [0, 1]})
+    with pytest.raises(InputError, match="no such file and not a shipped grid"):
+        grids.load_grid("no-such-grid")
+
+
+def test_set_cannot_override_an_axis():
+    with pytest.raises(InputError, match="conflicts with the grid axis"):
+        grids.load_grid("tiny-test", extra_set={"gaussiands.latent_dim": 8})
+    g = grids.load_grid("tiny-test", extra_set={"train.iterations": 30})
+    assert all(c.overrides["train.iterations"] == 30 for c in g.cells())
+
+
+def test_scene_specs(tmp_path, monkeypatch):
+    folder = tmp_path / "myscene"
+    folder.mkdir()
+    monkeypatch.setenv("MYDATA", str(tmp_path))
+    g = _grid(scenes=["${MYDATA}/myscene", {"preset": "tabletop-small", "seed": 3, "resolution": [64, 48]}])
+    specs = {c.scene.label for c in g.cells()}
+    assert specs == {"myscene", "tabletop-small-3-64x48"}
+    path_spec = [c.scene for c in g.cells() if c.scene.path][0]
+    assert grids.resolve_scene(path_spec, tmp_path) == folder.resolve()
+    monkeypatch.delenv("MYDATA")
+    with pytest.raises(InputError):
+        grids.resolve_scene(path_spec, tmp_path)
+
+
+# ------------------------------------------------------------------------- status / stale detection
+def _status(run_dir, **kw):
+    write_json_atomic(run_dir / grids.CELL_STATUS_FILE, kw)
+
+
+def test_cell_state(tmp_path):
+    d = tmp_path / "cell"
+    d.mkdir()
+    assert grids.cell_state(d) == "pending"
+    host = socket.gethostname()
+    _status(d, state="running", pid=os.getpid(), host=host, heartbeat=time.time())
+    assert grids.cell_state(d) == "running"
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    _status(d, state="running", pid=dead.pid, host=host, heartbeat=time.time())
+    assert grids.cell_state(d) == "stale"                      # killed worker: resumable
+    _status(d, state="running", pid=1, host="other-node", heartbeat=time.time() - 10 * grids.STALE_AFTER_S)
+    assert grids.cell_state(d) == "stale"                      # heartbeat too old on another node
+    _status(d, state="running", pid=1, host="other-node", heartbeat=time.time())
+    assert grids.cell_state(d) == "running"
+    _status(d, state="done")
+    assert grids.cell_state(d) == "stale"                      # no results.json: not finished
+    (d / "results.json").write_text("{}")
+    assert grids.cell_state(d) == "done"
+    _status(d, state="failed", error="boom")
+    assert grids.cell_state(d) == "failed"
+    (d / grids.CELL_STATUS_FILE).write_text('{"state": "runn')  # torn file
+    assert grids.cell_state(d) == "pending"
+
+
+def test_format_status_counts():
+    rows = [{"run_id": "a", "state": "done", "method": "m", "scene": "s", "seed": 0, "axes": "x=1", "wall_s": 1.5,
+             "attempt": 1, "error": ""},
+            {"run_id": "b", "state": "failed", "method": "m", "scene": "s", "seed": 0, "axes": "x=2", "wall_s": None,
+             "attempt": 2, "error": "ValueError: bad"}]
+    text = grids.format_status(rows)
+    assert "2 cells: done 1, failed 1" in text
+    assert "ValueError: bad" in text

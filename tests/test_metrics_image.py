@@ -1,0 +1,131 @@
+"""PSNR and SSIM: hand-computed values and agreement with scikit-image."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+from skimage.metrics import structural_similarity as sk_ssim
+
+from gsbench.errors import InputError
+from gsbench.metrics import METRIC_IMPL, PSNR_IMPL, SSIM_IMPL, psnr, ssim, ssim_map
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "kaolin_clock" / "views"
+# Measured: |ours(valid) - skimage| == 0.0 on every image below (float64); the bound leaves room
+# for BLAS / filter summation-order differences on other machines.
+SSIM_TOL = 1e-9
+
+
+def _skimage(a, b):
+    return sk_ssim(a, b, gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=1,
+                   channel_axis=-1 if a.ndim == 3 else None)
+
+
+def _natural_like(h, w, seed):
+    """Smooth shading, hard edges and fine texture: the statistics of a rendered scene."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w] / max(h, w)
+    img = np.stack([0.5 + 0.3 * np.sin(6 * x + c) * np.cos(4 * y - c) for c in range(3)], -1)
+    img[(x - 0.5) ** 2 + (y - 0.4) ** 2 < 0.05] = [0.9, 0.2, 0.1]
+    img[int(0.7 * h):, : int(0.3 * w)] = 0.05
+    img += 0.03 * rng.standard_normal(img.shape)
+    return np.clip(img, 0, 1)
+
+
+def test_psnr_hand_values():
+    gt = np.zeros((4, 4, 3))
+    pred = np.full((4, 4, 3), 0.1)
+    assert psnr(pred, gt, quantize=False) == pytest.approx(20.0, abs=1e-9)      # MSE 0.01
+    # quantised: 0.1 * 255 = 25.5 rounds half up to 26
+    assert psnr(pred, gt) == pytest.approx(20 * math.log10(255 / 26), abs=1e-9)
+
+
+def test_psnr_identical_capped_and_clipping():
+    a = np.random.default_rng(0).random((8, 8, 3))
+    assert psnr(a, a) == pytest.approx(100.0)
+    assert psnr(a, a, quantize=False) == pytest.approx(100.0)
+    # values above 1 are clipped before the comparison
+    assert psnr(np.full((4, 4), 1.7), np.ones((4, 4)), quantize=False) == pytest.approx(100.0)
+
+
+def test_psnr_bad_input():
+    with pytest.raises(InputError):
+        psnr(np.zeros((4, 4)), np.zeros((4, 5)))
+    bad = np.zeros((4, 4))
+    bad[0, 0] = np.nan
+    with pytest.raises(InputError):
+        psnr(bad, np.zeros((4, 4)))
+
+
+@pytest.mark.parametrize("shape", [(64, 80, 3), (37, 41), (11, 11, 3), (96, 128, 1)])
+def test_ssim_matches_skimage_random(shape):
+    rng = np.random.default_rng(sum(shape))
+    a = rng.random(shape)
+    b = np.clip(a + 0.15 * rng.standard_normal(shape), 0, 1)
+    assert abs(ssim(a, b) - _skimage(a, b)) <= SSIM_TOL
+
+
+def test_ssim_matches_skimage_natural_like():
+    a = _natural_like(120, 160, 1)
+    for b in (cv2.GaussianBlur(a, (5, 5), 1.2), np.clip(a + 0.05 * np.random.default_rng(2).standard_normal(a.shape), 0, 1),
+              np.roll(a, 2, axis=1)):
+        assert abs(ssim(a, b) - _skimage(a, b)) <= SSIM_TOL
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/kaolin_clock absent (fresh clone)")
+def test_ssim_matches_skimage_real_views():
+    a = cv2.imread(str(SHARED / "0_rgb.png"))[..., ::-1] / 255.0
+    b = cv2.imread(str(SHARED / "1_rgb.png"))[..., ::-1] / 255.0
+    assert abs(ssim(a, b) - _skimage(a, b)) <= SSIM_TOL
+    blurred = cv2.GaussianBlur(a, (7, 7), 2.0)
+    assert abs(ssim(a, blurred) - _skimage(a, blurred)) <= SSIM_TOL
+
+
+def _ssim_zeropad_reference(a, b):
+    """3DGS-style SSIM written independently with torch conv2d, zero padding 5."""
+    g = torch.exp(-((torch.arange(11, dtype=torch.float64) - 5) ** 2) / (2 * 1.5 ** 2))
+    g = g / g.sum()
+    w = (g[:, None] @ g[None, :])[None, None]
+    x = torch.from_numpy(a).permute(2, 0, 1)[:, None]
+    y = torch.from_numpy(b).permute(2, 0, 1)[:, None]
+    conv = lambda t: F.conv2d(t, w, padding=5)  # noqa: E731
+    mx, my = conv(x), conv(y)
+    sxx, syy, sxy = conv(x * x) - mx ** 2, conv(y * y) - my ** 2, conv(x * y) - mx * my
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    m = ((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx ** 2 + my ** 2 + c1) * (sxx + syy + c2))
+    return float(m.mean())
+
+
+def test_ssim_zeropad_border_rule_explains_difference():
+    a = _natural_like(48, 64, 3)
+    b = cv2.GaussianBlur(a, (5, 5), 1.5)
+    zp = ssim(a, b, border="zeropad")
+    assert zp == pytest.approx(_ssim_zeropad_reference(a, b), abs=1e-10)
+    # the two rules disagree overall ...
+    assert abs(zp - _skimage(a, b)) > 1e-4
+    # ... but only in the 5-px frame: the interior of the zero-padded map is the valid map
+    full = ssim_map(a, b, border="zeropad")
+    valid = ssim_map(a, b, border="valid")
+    assert full.shape[:2] == (48, 64) and valid.shape[:2] == (38, 54)
+    np.testing.assert_allclose(full[5:-5, 5:-5], valid, atol=1e-12)
+
+
+def test_ssim_properties_and_errors():
+    a = _natural_like(32, 32, 4)
+    assert ssim(a, a) == pytest.approx(1.0, abs=1e-12)
+    b = np.clip(a + 0.1, 0, 1)
+    assert ssim(a, b) == pytest.approx(ssim(b, a), abs=1e-12)
+    with pytest.raises(InputError):
+        ssim(np.zeros((8, 8)), np.zeros((8, 8)))        # smaller than the 11x11 window
+    with pytest.raises(InputError):
+        ssim(a, a, border="reflect")
+
+
+def test_impl_ids():
+    assert METRIC_IMPL["psnr"] == PSNR_IMPL[True] and "uint8" in PSNR_IMPL[True]
+    assert METRIC_IMPL["ssim"] == SSIM_IMPL["valid"] and "valid" in SSIM_IMPL["valid"]
+    assert "zeropad" in SSIM_IMPL["zeropad"]
