@@ -289,9 +289,22 @@ def load_scene(path: str | Path, layout: str = "auto") -> Scene:
         _attach_lerf(scene, root)
     if (root / SYNTHETIC_META).is_file():
         _attach_synthetic(scene, root)
-    if scene.extent <= 1e-9:
-        raise InputError(f"{root}: all cameras share one centre; the scene extent is undefined")
+    _settle_extent(scene)
     return scene
+
+
+def _settle_extent(scene: Scene) -> None:
+    """Cameras sharing one centre (one view, a rotation-only capture) give no camera spread: use the
+    sparse points' spread around the centre, else 1.0; `meta["extent_source"]` says which."""
+    if scene.extent > 1e-9:
+        scene.meta["extent_source"] = "camera centres (3DGS: 1.1 x max distance from their mean)"
+    elif scene.has_points:
+        c = np.mean([cam.center for cam in scene.cameras], axis=0)
+        scene.extent = float(1.1 * np.max(np.linalg.norm(scene.points - c, axis=1)))
+        scene.meta["extent_source"] = "sparse points (cameras share one centre)"
+    else:
+        scene.extent = 1.0
+        scene.meta["extent_source"] = "default 1.0 (cameras share one centre and there are no points)"
 
 
 def scene_fingerprint(path: str | Path, layout: str = "auto") -> str:

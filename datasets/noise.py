@@ -5,7 +5,7 @@ Scale-free: every level is relative to the median valid depth `m`, so one table 
 depth and relative priors alike. Per kind and level 1..5:
   gaussian     additive N(0, s * m), s = 0.01, 0.02, 0.05, 0.10, 0.20
   poisson      shot noise: d' = m / N * Poisson(N * d / m), N = 1000, 300, 100, 30, 10 counts at depth m
-  motion_blur  a line kernel of 3, 5, 9, 15, 21 px at a seeded angle, normalised over valid pixels only
+  motion_blur  a line kernel of 3, 5, 9, 15, 21 px at an angle drawn from the seed, normalised over valid pixels only
                (invalid pixels never bleed in)
   salt_pepper  a fraction p = 0.01, 0.02, 0.05, 0.10, 0.20 of valid pixels set to the smallest (pepper)
                or largest (salt) valid depth, half each
@@ -29,11 +29,15 @@ LEVELS = {
 
 
 def _line_kernel(length: int, angle: float) -> np.ndarray:
+    """A `length`-tap line through the kernel centre: one tap per pixel along the dominant axis."""
     k = np.zeros((length, length), np.float32)
-    c = (length - 1) / 2.0
+    c = (length - 1) // 2
     dx, dy = np.cos(angle), np.sin(angle)
-    for s in np.linspace(-c, c, 4 * length):
-        k[int(round(c + s * dy)), int(round(c + s * dx))] = 1.0
+    for t in range(-c, c + 1):
+        if abs(dx) >= abs(dy):
+            k[c + int(round(t * dy / dx)), c + t] = 1.0
+        else:
+            k[c + t, c + int(round(t * dx / dy))] = 1.0
     return k / k.sum()
 
 
@@ -65,7 +69,9 @@ def apply_noise(depth: np.ndarray, valid: np.ndarray, kind: str, severity: int, 
         lam = np.clip(level * np.maximum(d, 0.0) / m, 0.0, 1e12)
         d = rng.poisson(lam).astype(np.float64) * (m / level)
     elif kind == "motion_blur":
-        k = _line_kernel(int(level), float(rng.uniform(0, np.pi)))
+        # the angle depends on the seed only, so severities of one seed blur along the same line
+        angle = float(np.random.default_rng([int(seed), NOISE_KINDS.index(kind)]).uniform(0, np.pi))
+        k = _line_kernel(int(level), angle)
         num = cv2.filter2D(np.where(v, out, 0.0), cv2.CV_64F, k, borderType=cv2.BORDER_CONSTANT)
         den = cv2.filter2D(v.astype(np.float64), cv2.CV_64F, k, borderType=cv2.BORDER_CONSTANT)
         d = num[v] / np.maximum(den[v], 1e-12)  # den > 0 at valid pixels: the kernel centre is in it

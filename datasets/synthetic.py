@@ -16,7 +16,7 @@ Output folder (layout "both"; "3dovs" and "lerf" write the subsets they need):
   sparse/0/*.bin                        COLMAP model (PINHOLE cameras, surface sample points)
   poses_bounds.npy                      LLFF poses (3dovs)
   segmentations/classes.txt, segmentations/<idx>/<class>.png  (3dovs; every class of every view)
-  label/<scene>/frame_00001.json ...    LERF-OVS polygons of objects and decals (lerf)
+  label/<preset>/frame_00001.json ...   LERF-OVS polygons of objects and decals (lerf)
   gt/depth/<stem>.npy                   float32 camera-space z, 0 where no surface
   gt/instances/<stem>.png               uint16, instance id + 1, 0 = none
   gt/removal/<stem>/<id>.png            RGB without object <id>
@@ -496,7 +496,7 @@ def make_scene(preset: str, out: Path, seed: int = 0, views: int | None = None,
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
-        _write(spec, tmp, out.name, preset, seed, layout, rng, progress, tqdm)
+        _write(spec, tmp, preset, preset, seed, layout, rng, progress, tqdm)
         if out.exists():
             out.rmdir()
         os.replace(tmp, out)

@@ -64,10 +64,10 @@ def _mean(values: list) -> Optional[float]:
 
 
 def eval_camera(camera, max_width: Optional[int]):
-    """The camera at the training resolution (train.max_width), which evaluation also uses."""
-    if max_width and camera.width > int(max_width):
-        return camera.scaled(int(max_width) / camera.width)
-    return camera
+    """The camera at the training resolution (train.max_width, the rule training uses)."""
+    from gsbench.methods.base import training_size
+    w, h = training_size(camera, max_width)
+    return camera if (w, h) == (camera.width, camera.height) else camera.resized(w, h)
 
 
 def resize_image(img: np.ndarray, width: int, height: int) -> np.ndarray:

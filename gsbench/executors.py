@@ -5,6 +5,7 @@ The grid code only calls `executor.map(fn, items)`; it does not know which execu
 - `LocalExecutor(jobs)`: a process pool (spawn context: no forked torch/OpenMP state), one cell
   per worker; each worker uses max(1, cores // jobs) torch threads so `--jobs N` never
   oversubscribes the machine. On a CUDA machine, worker k is pinned to GPU k % n_gpus.
+- `SerialExecutor()`: in this process, one cell after another (debugging).
 - `SubmititExecutor(folder, cluster)`: submitit job arrays (`map_array`). cluster="slurm" submits
   to SLURM, cluster="local" runs each job as a local subprocess (used in the tests), "debug" runs
   in-process. SLURM parameters (partition, time, cpus, gpus, array parallelism) pass through.
@@ -21,7 +22,19 @@ from typing import Any, Callable, Optional, Sequence
 
 from tqdm import tqdm
 
-EXECUTORS = ("local", "submitit")
+EXECUTORS = ("local", "submitit", "serial")
+
+
+class SerialExecutor:
+    """Cells one after another in this process (debugging; a crash takes the grid down with it)."""
+
+    name = "serial"
+
+    def __init__(self, progress: bool = True) -> None:
+        self.progress = progress
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> list[Any]:
+        return [fn(item) for item in tqdm(list(items), desc="cells (serial)", disable=not self.progress)]
 
 
 def _cpu_count() -> int:
@@ -146,6 +159,8 @@ def make_executor(kind: str, jobs: int = 1, folder: Optional[str | os.PathLike] 
     """Build an executor by name (the CLI's --executor)."""
     if kind == "local":
         return LocalExecutor(jobs=jobs, progress=progress)
+    if kind == "serial":
+        return SerialExecutor(progress=progress)
     if kind == "submitit":
         if folder is None:
             raise ValueError("the submitit executor needs a log folder")

@@ -95,7 +95,8 @@ def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: boo
     torch.manual_seed(seed)
     np.random.seed(seed)
     threads_before = torch.get_num_threads()
-    torch.set_num_threads(max(1, os.cpu_count() or 1))
+    # a grid executor sets GSBENCH_THREADS (cores // jobs) so parallel cells do not oversubscribe
+    torch.set_num_threads(int(os.environ.get("GSBENCH_THREADS") or 0) or max(1, os.cpu_count() or 1))
     write_json_atomic(run_dir / "config.json", cfg)
     write_json_atomic(run_dir / "env.json", env_info())
     prev_s = float((st or {}).get("train_s_so_far") or 0.0)

@@ -6,7 +6,8 @@ shared/EVAL_PROTOCOLS.md; the module docstrings state every rule (borders, empty
 Bad input raises gsbench.errors.InputError. Images are (H, W) or (H, W, C) in [0, 1].
 
 Image metrics (image.py, perceptual.py)
-  psnr(pred, gt, *, quantize=True) -> float                    uint8-rounded by default; 100 dB cap
+  psnr(pred, gt, *, quantize=True, mask=None) -> float         uint8-rounded by default; 100 dB cap;
+                                                               mask: MSE over selected pixels only
   ssim(pred, gt, *, border="valid"|"zeropad") -> float        Gaussian 11 / 1.5, K1 .01, K2 .03
   ssim_map(pred, gt, *, border="valid") -> (H', W', C) array
   lpips(pred, gt, *, net="vgg"|"alex", model=None, weights_dir=None, device="cpu") -> LPIPSResult

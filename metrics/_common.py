@@ -84,3 +84,25 @@ def unit_rows(a: np.ndarray, name: str, *, zero: str = "error", eps: float = 1e-
         if zero != "keep":
             raise ValueError(f"zero must be 'error' or 'keep', got {zero!r}")
     return a / np.where(small, 1.0, n)
+
+
+def pixel_text_cosines(features: Any, texts: np.ndarray, name: str) -> tuple[np.ndarray, tuple[int, int]]:
+    """Cosine of every pixel feature (H, W, D) with every text row (K, D) -> ((H*W, K) float64, (H, W)).
+
+    Works on the features in place (float32, no normalised copy: a 985x725x512 map is 1.4 GB).
+    A NaN/inf feature is an InputError; a zero feature has cosine 0 with every text.
+    """
+    f = to_numpy(features, name)
+    if f.ndim != 3:
+        raise InputError(f"{name}: expected (H, W, D), got shape {f.shape}")
+    h, w, d = f.shape
+    if texts.ndim != 2 or texts.shape[1] != d:
+        raise InputError(f"{name}: feature width {d} does not match the text embeddings {texts.shape}")
+    flat = np.ascontiguousarray(f.reshape(-1, d), dtype=np.float32)
+    sq = np.einsum("ij,ij->i", flat, flat, dtype=np.float64)     # no (N, D) temporary
+    if not np.all(np.isfinite(sq)):
+        raise InputError(f"{name}: contains NaN or inf")
+    norm = np.sqrt(sq)
+    tu = unit_rows(texts.astype(np.float64), "text embeddings").astype(np.float32)
+    dots = (flat @ tu.T).astype(np.float64)
+    return np.where(norm[:, None] > 1e-12, dots / np.maximum(norm, 1e-12)[:, None], 0.0), (h, w)

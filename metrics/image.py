@@ -29,7 +29,7 @@ import numpy as np
 
 from gsbench.errors import InputError
 
-from ._common import finite_float, same_shape
+from ._common import as_mask, finite_float, same_shape
 
 SSIM_WINDOW = 11
 SSIM_SIGMA = 1.5
@@ -48,6 +48,8 @@ def _image_pair(pred: Any, gt: Any) -> tuple[np.ndarray, np.ndarray]:
     if a.ndim not in (2, 3):
         raise InputError(f"pred image: expected (H, W) or (H, W, C), got shape {a.shape}")
     same_shape(a, b, "pred image", "gt image")
+    if a.ndim == 3 and a.shape[2] not in (1, 3, 4):
+        raise InputError(f"pred image: expected channels last (H, W, C) with C in 1, 3, 4, got shape {a.shape}")
     if a.size == 0:
         raise InputError(f"pred image: empty array of shape {a.shape}")
     if a.ndim == 2:
@@ -61,12 +63,24 @@ def quantize_uint8(x: np.ndarray) -> np.ndarray:
     return np.floor(np.clip(x, 0.0, 1.0) * 255.0 + 0.5) / 255.0
 
 
-def psnr(pred: Any, gt: Any, *, quantize: bool = True) -> float:
-    """PSNR in dB of `pred` against `gt` (both [0, 1]); see the module docstring for the cap."""
+def psnr(pred: Any, gt: Any, *, quantize: bool = True, mask: Any | None = None) -> float:
+    """PSNR in dB of `pred` against `gt` (both [0, 1]); see the module docstring for the cap.
+
+    mask: optional (H, W) selection; the MSE is then taken over the selected pixels only (e.g.
+    PSNR outside a removed object). A mask that selects nothing is an InputError.
+    """
     a, b = _image_pair(pred, gt)
     if quantize:
         a, b = quantize_uint8(a), quantize_uint8(b)
-    mse = float(np.mean((a - b) ** 2))
+    sq = (a - b) ** 2
+    if mask is not None:
+        m = as_mask(mask, "psnr mask")
+        if m.shape != a.shape[:2]:
+            raise InputError(f"psnr mask has shape {m.shape}, images are {a.shape[:2]}")
+        if not m.any():
+            raise InputError("psnr mask selects no pixel")
+        sq = sq[m]
+    mse = float(np.mean(sq))
     return -10.0 * math.log10(max(mse, PSNR_MSE_FLOOR))
 
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from gsbench.errors import InputError
 
-from ._common import as_mask, finite_float, mean_or_none, to_numpy, unit_rows
+from ._common import as_mask, finite_float, mean_or_none, pixel_text_cosines, to_numpy, unit_rows
 from .segmentation import iou
 
 CANONICAL_NEGATIVES = ("object", "things", "stuff", "texture")
@@ -55,24 +55,18 @@ def lerf_relevancy(pixel_features: Any, query_embedding: Any, negative_embedding
     All vectors are L2-normalised first (pixels with a zero feature stay 0: relevancy 0.5).
     softmax(t [a, b])[0] is computed as the sigmoid t (a - b), which cannot overflow.
     """
-    f = finite_float(pixel_features, "pixel_features", np.float32)  # (H, W, 512) in float64 is GBs
-    if f.ndim != 3:
-        raise InputError(f"pixel_features: expected (H, W, D), got shape {f.shape}")
     q = finite_float(query_embedding, "query_embedding")
     single = q.ndim == 1
     q = q[None] if single else q
     n = finite_float(negative_embeddings, "negative_embeddings")
     n = n[None] if n.ndim == 1 else n
-    d = f.shape[2]
-    if q.ndim != 2 or q.shape[1] != d or n.ndim != 2 or n.shape[1] != d or n.shape[0] == 0:
-        raise InputError(f"embeddings must be (D,) / (Q, D) / (J>0, D) with D = {d}; got query {q.shape}, "
-                         f"negatives {n.shape}")
-    h, w = f.shape[:2]
-    fu = unit_rows(f.reshape(-1, d), "pixel_features", zero="keep")
-    qu = unit_rows(q, "query_embedding")
-    nu = unit_rows(n, "negative_embeddings")
-    pos = (fu @ qu.T.astype(np.float32)).astype(np.float64)   # (HW, Q)
-    neg = (fu @ nu.T.astype(np.float32)).astype(np.float64)   # (HW, J)
+    if q.ndim != 2 or n.ndim != 2 or n.shape[0] == 0 or q.shape[1] != n.shape[1]:
+        raise InputError(f"embeddings must be (D,) / (Q, D) and (J>0, D); got query {q.shape}, negatives {n.shape}")
+    unit_rows(q, "query_embedding")          # zero query / negative vectors are errors
+    unit_rows(n, "negative_embeddings")
+    cos, (h, w) = pixel_text_cosines(pixel_features, np.concatenate([q, n]), "pixel_features")
+    nq = q.shape[0]
+    pos, neg = cos[:, :nq], cos[:, nq:]
     z = temperature * (pos[:, :, None] - neg[:, None, :])  # (HW, Q, J)
     r = _sigmoid(z).min(axis=2)         # worst case over the negatives
     r = r.T.reshape(-1, h, w)

@@ -22,7 +22,7 @@ import numpy as np
 
 from gsbench.errors import InputError
 
-from ._common import as_mask, finite_float, mean_or_none, to_numpy, unit_rows
+from ._common import as_mask, finite_float, mean_or_none, pixel_text_cosines, to_numpy
 from .segmentation import BOUNDARY_DILATION_RATIO, boundary_iou, iou
 
 OVS3D_IMPL = "3dovs/argmax-cos/v1"
@@ -31,15 +31,11 @@ MISSING_POLICIES = ("error", "skip", "zero")
 
 def ovs3d_predict(pixel_features: Any, class_embeddings: Any) -> np.ndarray:
     """(H, W, D) features, (C, D) class text embeddings -> (H, W) int32 class index (first on ties)."""
-    f = finite_float(pixel_features, "pixel_features", np.float32)
-    t = finite_float(class_embeddings, "class_embeddings", np.float32)
-    if f.ndim != 3 or t.ndim != 2 or t.shape[1] != f.shape[2] or t.shape[0] == 0:
-        raise InputError(f"ovs3d_predict: expected features (H, W, D) and classes (C>0, D); "
-                         f"got {f.shape} and {t.shape}")
-    h, w, d = f.shape
-    fu = unit_rows(f.reshape(-1, d), "pixel_features", zero="keep")
-    tu = unit_rows(t, "class_embeddings")
-    return np.argmax(fu @ tu.T, axis=1).astype(np.int32).reshape(h, w)
+    t = finite_float(class_embeddings, "class_embeddings")
+    if t.ndim != 2 or t.shape[0] == 0:
+        raise InputError(f"ovs3d_predict: expected class embeddings (C>0, D), got {t.shape}")
+    cos, (h, w) = pixel_text_cosines(pixel_features, t, "pixel_features")
+    return np.argmax(cos, axis=1).astype(np.int32).reshape(h, w)
 
 
 def resize_nearest(mask: Any, width: int, height: int) -> np.ndarray:

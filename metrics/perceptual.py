@@ -40,7 +40,7 @@ from torch import nn
 
 from gsbench.errors import InputError
 
-from ._common import finite_float, same_shape
+from ._common import finite_float
 
 LPIPS_NETS = ("vgg", "alex")
 BACKBONE_FILES = {"vgg": "vgg16-397923af.pth", "alex": "alexnet-owt-7be5be79.pth"}
@@ -258,7 +258,8 @@ def lpips(pred: Any, gt: Any, *, net: str = "vgg", model: LPIPSNet | None = None
             return LPIPSResult(None, reason, lpips_impl(net), net)
     x0 = _to_batch(pred, "pred image")
     x1 = _to_batch(gt, "gt image")
-    same_shape(x0.numpy(), x1.numpy(), "pred image", "gt image")
+    if x0.shape != x1.shape:
+        raise InputError(f"pred image has shape {tuple(x0.shape[2:])} but gt image has {tuple(x1.shape[2:])}")
     model = model.to(device)
     with torch.no_grad():
         v = float(model(x0.to(device), x1.to(device))[0])

@@ -61,7 +61,7 @@ def _impl_table(df: pd.DataFrame) -> str:
 def provenance_html(res: Results, writer_version: str) -> str:
     df = res.df
     prov = [c for c in df.columns if c.startswith("provider.")]
-    mach = [c for c in df.columns if c.startswith("machine.")]
+    mach = [c for c in df.columns if c.startswith(("machine.", "env."))]
     parts = [
         "<p>Every number above comes from the results.json files listed in the collected table; "
         "numbers from different evaluation protocols are not comparable and are never averaged together.</p>",
@@ -69,7 +69,7 @@ def provenance_html(res: Results, writer_version: str) -> str:
         _counts_table(df, ["backend"], "Render backends"),
         _counts_table(df, ["protocol"], "Evaluation protocols"),
         _impl_table(df),
-        _counts_table(df, mach, "Machines that produced the results (from results.json `machine`)") if mach
+        _counts_table(df, mach, "Machines and versions that produced the results (results.json `machine`; env.* from the run's env.json)") if mach
         else "<p>Machine: not recorded in results.json.</p>",
         f"<p class=\"meta\">Report written by gsbench {e(writer_version)}.</p>",
     ]

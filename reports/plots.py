@@ -27,13 +27,15 @@ from gsbench.reports.studies import PROTOCOL_SHORT, _get, _slug, lambda_points, 
 from gsbench.reports.table import Table  # noqa: E402
 from gsbench.store import read_jsonl, write_bytes_atomic  # noqa: E402
 
-DPI = 110
+DPI = 100
 
 
 def _save(fig, path: Path) -> Path:
     import io
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
+    if not fig.get_tight_layout():
+        fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=DPI)
     plt.close(fig)
     write_bytes_atomic(path, buf.getvalue())
     return path
@@ -180,16 +182,34 @@ def plot_time_curves(res: Results, study: Any, run_ids: list[str], path: Path) -
     name = "standalone / reconstruction runs" if study is None else f"study '{study}'"
     fig.suptitle(f"Error against run time — {name} ({len(run_ids)} runs; lines: periodic eval, "
                  f"dots: final results)", fontsize=11)
-    fig.tight_layout()
     return _save(fig, path), notes
 
 
 # ---------------------------------------------------------------------------- lambda grid
+def _mode(values: list) -> Any:
+    """Most common value (first seen wins a tie): the grid's default of a lambda."""
+    best, count = None, 0
+    for v in values:
+        c = sum(1 for w in values if same(v, w))
+        if c > count:
+            best, count = v, c
+    return best
+
+
+def _lambda_slice(res: Results, sids: list[str], axes_all: list[str], keep: list[str]) -> list[str]:
+    """Runs whose lambdas other than `keep` sit at their most common value (the grid default), so a
+    surface over `keep` is not averaged with runs of another sweep."""
+    fixed = {a: _mode([_get(res, r, a) for r in sids]) for a in axes_all if a not in keep}
+    return [r for r in sids if all(same(_get(res, r, a), v) for a, v in fixed.items())]
+
+
 def plot_lambda_surfaces(res: Results, path_prefix: Path) -> list[Path]:
-    """Per scene: mean mIoU over each pair of varying lambdas as an annotated heatmap (other
-    lambdas and seeds averaged), with the Pearson r of each lambda against mIoU in the titles."""
+    """Per scene: mIoU over each pair of lambdas that was swept together (>= 75 % of the pair's
+    cells filled, the other lambdas at their grid default) as an annotated heatmap; lambdas in no
+    such pair get a response curve. The Pearson r of each lambda against mIoU (over all runs) is in
+    the labels and title."""
     ids = res.run_ids(study="lambda_grid")
-    out = []
+    out: list[Path] = []
     axes_all = [a for a in AX_LAMBDAS if a in res.runs.columns and len(res.distinct(a, ids)) > 1]
     if not ids or not axes_all:
         return out
@@ -197,73 +217,73 @@ def plot_lambda_surfaces(res: Results, path_prefix: Path) -> list[Path]:
         concrete = res.resolve("miou", pr)
         if concrete is None:
             continue
-        sids = [r for r in res.run_ids(study="lambda_grid", scene=sc, protocol=pr) if res.runs.at[r, "status"] == "done"]
+        sids = [r for r in res.run_ids(study="lambda_grid", scene=sc, protocol=pr)
+                if res.runs.at[r, "status"] == "done" and math.isfinite(res.value(r, concrete))]
+        if not sids:
+            continue
         r_of = {}
         for a in axes_all:
             r, why = pearson(*lambda_points(res, sc, pr, a, "miou"))
             r_of[a] = f"r={r:+.2f}" if r is not None else f"r n/a ({why})"
-        pairs = list(itertools.combinations(axes_all, 2))
         short = {a: "λ_" + a.rsplit(".", 1)[-1] for a in axes_all}
-        if not pairs:  # one varying lambda: a response curve
-            a = axes_all[0]
-            xs, ys = lambda_points(res, sc, pr, a, "miou")
-            if not xs:
+        surfaces = []
+        for a, b in itertools.combinations(axes_all, 2):
+            sl = _lambda_slice(res, sids, axes_all, [a, b])
+            av = sorted(float(v) for v in res.distinct(a, sl) if not is_null(v))
+            bv = sorted(float(v) for v in res.distinct(b, sl) if not is_null(v))
+            if len(av) < 2 or len(bv) < 2:
                 continue
-            fig, ax = plt.subplots(figsize=(6, 4.2))
-            vals = sorted(set(xs))
-            means = [np.mean([y for x, y in zip(xs, ys) if x == v]) * 100 for v in vals]
-            ax.plot(vals, means, "o-", label="mean mIoU")
-            ax.scatter(xs, [y * 100 for y in ys], s=12, alpha=0.5, label="runs")
-            ax.set_xlabel(short[a])
-            ax.set_ylabel("mIoU (%)")
-            ax.set_title(f"mIoU vs {short[a]} on {sc} ({r_of[a]})")
-            ax.legend()
-            out.append(_save(fig, Path(f"{path_prefix}_{_slug(sc)}.png")))
-            continue
-        ncol = min(3, len(pairs))
-        nrow = math.ceil(len(pairs) / ncol)
-        fig, axs = plt.subplots(nrow, ncol, figsize=(5.0 * ncol, 4.3 * nrow), squeeze=False)
-        drew = False
-        for k, (a, b) in enumerate(pairs):
-            ax = axs[k // ncol][k % ncol]
-            av = sorted(float(v) for v in res.distinct(a, sids) if not is_null(v))
-            bv = sorted(float(v) for v in res.distinct(b, sids) if not is_null(v))
             grid = np.full((len(bv), len(av)), np.nan)
             for i, y in enumerate(bv):
                 for j, x in enumerate(av):
-                    vals = [res.value(r, concrete) for r in sids
-                            if same(_get(res, r, a), x) and same(_get(res, r, b), y)]
-                    vals = [v for v in vals if math.isfinite(v)]
+                    vals = [res.value(r, concrete) for r in sl if same(_get(res, r, a), x) and same(_get(res, r, b), y)]
                     if vals:
                         grid[i, j] = float(np.mean(vals)) * 100.0
-            if np.all(np.isnan(grid)):
-                ax.set_axis_off()
-                continue
-            drew = True
+            if np.isfinite(grid).mean() >= 0.75:
+                surfaces.append((a, b, av, bv, grid))
+        in_pair = {x for a, b, *_ in surfaces for x in (a, b)}
+        curves = [a for a in axes_all if a not in in_pair]
+        n = len(surfaces) + len(curves)
+        ncol = min(3, n)
+        nrow = math.ceil(n / ncol)
+        fig, axs = plt.subplots(nrow, ncol, figsize=(max(7.5, 5.2 * ncol), 4.3 * nrow + 0.6), squeeze=False)
+        for k, (a, b, av, bv, grid) in enumerate(surfaces):
+            ax = axs[k // ncol][k % ncol]
             im = ax.imshow(grid, origin="lower", cmap="viridis", aspect="auto")
             ax.set_xticks(range(len(av)), [f"{v:g}" for v in av])
             ax.set_yticks(range(len(bv)), [f"{v:g}" for v in bv])
             ax.set_xlabel(f"{short[a]} ({r_of[a]})")
             ax.set_ylabel(f"{short[b]} ({r_of[b]})")
-            ax.set_title(f"mean mIoU (%) over {short[a]} × {short[b]}", fontsize=10)
+            ax.set_title(f"mIoU (%) over {short[a]} × {short[b]}", fontsize=10)
             finite = grid[np.isfinite(grid)]
-            mid = (finite.min() + finite.max()) / 2 if finite.size else 0
+            mid = (finite.min() + finite.max()) / 2
             for i in range(len(bv)):
                 for j in range(len(av)):
                     if np.isfinite(grid[i, j]):
                         ax.text(j, i, f"{grid[i, j]:.1f}", ha="center", va="center", fontsize=8,
                                 color="white" if grid[i, j] < mid else "black")
                     else:
-                        ax.text(j, i, "n/a", ha="center", va="center", fontsize=7, color="gray")
+                        ax.text(j, i, "no run", ha="center", va="center", fontsize=7, color="gray")
             fig.colorbar(im, ax=ax, label="mIoU (%)")
-        for k in range(len(pairs), nrow * ncol):
+        for k, a in enumerate(curves, start=len(surfaces)):
+            ax = axs[k // ncol][k % ncol]
+            sl = _lambda_slice(res, sids, axes_all, [a])
+            pts = [(float(_get(res, r, a)), res.value(r, concrete) * 100.0) for r in sl if _get(res, r, a) is not None]
+            vals = sorted({x for x, _ in pts})
+            ax.plot(vals, [np.mean([y for x, y in pts if x == v]) for v in vals], "o-", label="mean over seeds")
+            ax.scatter([x for x, _ in pts], [y for _, y in pts], s=12, alpha=0.5, color="gray", label="runs")
+            if len(vals) > 2 and min(vals) > 0 and max(vals) / min(vals) >= 20:
+                ax.set_xscale("log")
+            ax.set_xlabel(f"{short[a]} ({r_of[a]})")
+            ax.set_ylabel("mIoU (%)")
+            ax.set_title(f"mIoU vs {short[a]} (others at default)", fontsize=10)
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=7)
+        for k in range(n, nrow * ncol):
             axs[k // ncol][k % ncol].set_axis_off()
-        if not drew:
-            plt.close(fig)
-            continue
         rs = ", ".join(f"{short[a]} {r_of[a]}" for a in axes_all)
-        fig.suptitle(f"Lambda response surfaces on {sc} ({PROTOCOL_SHORT.get(pr, pr)}); "
-                     f"Pearson r with mIoU: {rs}", fontsize=11)
+        fig.suptitle(f"Lambda response surfaces on {sc} ({PROTOCOL_SHORT.get(pr, pr)})\n"
+                     f"Pearson r with mIoU (all runs): {rs}", fontsize=11)
         out.append(_save(fig, Path(f"{path_prefix}_{_slug(sc)}.png")))
     return out
 
@@ -375,7 +395,6 @@ def plot_latent(res: Results, path_prefix: Path) -> list[Path]:
             if ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=8)
         fig.suptitle(f"Latent-d trade-off on {sc} ({PROTOCOL_SHORT.get(pr, pr)})", fontsize=12)
-        fig.tight_layout()
         out.append(_save(fig, Path(f"{path_prefix}_{_slug(sc)}.png")))
     return out
 
@@ -436,5 +455,4 @@ def plot_table_bars(table: Table, path: Path) -> Path | None:
     for k in range(len(panels), nrow * ncol):
         axs[k // ncol][k % ncol].set_axis_off()
     fig.suptitle(table.title + " (black edge = best)", fontsize=12)
-    fig.tight_layout()
     return _save(fig, path)

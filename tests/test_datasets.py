@@ -295,6 +295,7 @@ def test_kaolin_clock_visual_hull_reprojects():
         keep[idx[~ok]] = False
     occ = keep.reshape(n, n, n)
     assert 0.01 < occ.mean() < 0.5
+    r_occ = float(np.linalg.norm(X[keep], axis=1).max()) + vox
     ious = []
     for i in s.test_ids:
         cam = s.cameras[i]
@@ -304,11 +305,15 @@ def test_kaolin_clock_visual_hull_reprojects():
         D /= np.linalg.norm(D, axis=1, keepdims=True)
         o = cam.center
         dist = np.linalg.norm(o)
+        near = np.linalg.norm(o + (D @ -o)[:, None] * D, axis=1) < r_occ  # rays passing the hull's sphere
+        Dn = D[near]
+        hit_n = np.zeros(len(Dn), bool)
+        for t in np.arange(dist - r_occ, dist + r_occ, 0.75 * vox):
+            k = np.floor((o + t * Dn + B) / vox).astype(int)
+            ins = np.all((k >= 0) & (k < n), 1) & ~hit_n
+            hit_n[ins] = occ[k[ins, 0], k[ins, 1], k[ins, 2]]
         hit = np.zeros(len(D), bool)
-        for t in np.arange(dist - B * 1.75, dist + B * 1.75, 0.75 * vox):
-            k = np.floor((o + t * D + B) / vox).astype(int)
-            ins = np.all((k >= 0) & (k < n), 1) & ~hit
-            hit[ins] = occ[k[ins, 0], k[ins, 1], k[ins, 2]]
+        hit[near] = hit_n
         hit = hit.reshape(cam.height, cam.width)
         gt = s.gt_classes(i) == 1
         ious.append((hit & gt).sum() / max((hit | gt).sum(), 1))

@@ -155,3 +155,9 @@ def test_empty_gt_and_bad_input():
         evaluate_lerf_scene([LerfPair("f", "q", [_block_map()], np.zeros((32, 32), bool))])
     with pytest.raises(InputError):
         evaluate_lerf_scene([LerfPair("f", "q", [_block_map()])])
+    feats = np.ones((4, 4, 3), np.float32)
+    feats[1, 2, 0] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        lerf_relevancy(feats, np.ones(3), np.eye(3))
+    with pytest.raises(InputError):
+        lerf_relevancy(np.ones((4, 4, 3)), np.zeros(3), np.eye(3))     # zero query embedding

@@ -14,7 +14,8 @@ import torch
 from gsbench.gaussians import GaussianField
 from gsbench.render import render
 from gsbench.render.cpu_backend import rasterize_cpu
-from gsbench.render.projection import project_gaussians
+from gsbench.render.projection import Projected, project_gaussians
+from gsbench.render.torch_backend import rasterize_torch
 from gsbench.scene import Camera
 
 from naive_render import naive_render  # tests/ is on sys.path under pytest (rootdir conftest-less import)
@@ -69,7 +70,16 @@ def assert_outputs_close(a, b, atol: float) -> None:
         assert err <= atol, f"{name}: max abs diff {err:.3g} > {atol}"
 
 
-def assert_grads_close(ga: dict, gb: dict, rtol: float) -> None:
+def rel_err(x: torch.Tensor, y: torch.Tensor) -> float:
+    """max |x - y| / max |y| (0 when both are all zero, inf when only y is)."""
+    ref = y.double().abs().max().item() if y.numel() else 0.0
+    err = (x.double() - y.double()).abs().max().item() if y.numel() else 0.0
+    if ref == 0.0:
+        return 0.0 if err == 0.0 else math.inf
+    return err / ref
+
+
+def assert_grads_close(ga: dict, gb: dict, rtol: float | dict) -> None:
     assert ga.keys() == gb.keys()
     for k, y in gb.items():
         x = ga[k]
@@ -77,12 +87,9 @@ def assert_grads_close(ga: dict, gb: dict, rtol: float) -> None:
         if y is None:
             continue
         assert torch.isfinite(x).all(), k
-        ref = y.double().abs().max().item() if y.numel() else 0.0
-        err = (x.double() - y.double()).abs().max().item() if y.numel() else 0.0
-        if ref == 0.0:
-            assert err == 0.0, f"{k}: reference gradient is zero, cpu max |g| = {err}"
-        else:
-            assert err <= rtol * ref, f"{k}: rel diff {err / ref:.3g} > {rtol} (max |g| {ref:.3g})"
+        tol = rtol[k] if isinstance(rtol, dict) else rtol
+        e = rel_err(x, y)
+        assert e <= tol, f"{k}: rel diff {e:.3g} > {tol:.3g} (max |g| {y.abs().max().item():.3g})"
 
 
 # --------------------------------------------------------------------------- hand-computed values
@@ -222,10 +229,45 @@ def test_cpu_matches_torch_extreme_float32(name):
     oc, gc = run(field, cam, "cpu", background=[0.3, 0.3, 0.3])
     ot, gt = run(field, cam, "torch", background=[0.3, 0.3, 0.3])
     assert_outputs_close(oc, ot, 1e-5)
-    assert_grads_close(gc, gt, 1e-4)
+    # Tolerance 1e-4, or twice the float32 reference's own error against float64 where the
+    # (shared, autograd) projection backward is ill-conditioned in float32 (aspect 1e4 needles:
+    # rasterizer-level gradients agree to 1e-6 there, see the test below).
+    _, g64 = run(field, cam, "torch", dtype=torch.float64, background=[0.3, 0.3, 0.3])
+    tol = {k: max(1e-4, 2.0 * rel_err(gt[k], g64[k])) for k in gt if gt[k] is not None}
+    assert_grads_close(gc, gt, tol)
     if name == "empty":
         assert oc.info["n_visible"] == 0
         assert torch.all(oc.alpha == 0) and torch.all(gc["means"] == 0)
+
+
+def _raster_grads(fn, proj, channels, width, height, seed=3):
+    """Gradients of a fixed random linear loss w.r.t. the rasterizer's own inputs."""
+    dt = channels.dtype
+    m2 = proj.means2d.detach()[proj.ids].clone().requires_grad_(True)
+    con = proj.conics.detach().clone().requires_grad_(True)
+    op = proj.opacities.detach().clone().requires_grad_(True)
+    ch = channels.detach().clone().requires_grad_(True)
+    full = torch.zeros_like(proj.means2d).index_put((proj.ids,), m2)
+    p2 = Projected(proj.ids, full, con, proj.depths, op, proj.radii, proj.cov2d)
+    out, t = fn(p2, ch, width, height)
+    g = torch.Generator().manual_seed(seed)
+    loss = (out * torch.randn(out.shape, generator=g).to(dt)).sum() + (t * torch.randn(t.shape, generator=g).to(dt)).sum()
+    if loss.requires_grad:
+        loss.backward()
+    return out.detach(), t.detach(), {"means2d": m2.grad, "conics": con.grad, "opacities": op.grad, "channels": ch.grad}
+
+
+@pytest.mark.parametrize("name", sorted(EXTREME))
+def test_rasterizer_level_gradients_match_torch_extreme(name):
+    field, cam = EXTREME[name]
+    proj = project_gaussians(field.to(dtype=torch.float32), cam)
+    ch = torch.rand(proj.ids.numel(), 6, generator=torch.Generator().manual_seed(1))
+    oc, tc, gc = _raster_grads(rasterize_cpu, proj, ch, cam.width, cam.height)
+    ot, tt, gt = _raster_grads(rasterize_torch, proj, ch, cam.width, cam.height)
+    assert (oc - ot).abs().max().item() <= 1e-5 if oc.numel() else True
+    assert (tc - tt).abs().max().item() <= 1e-6
+    if proj.ids.numel():
+        assert_grads_close(gc, gt, 1e-4)
 
 
 @pytest.mark.parametrize("name", ["border", "opacity_0_1", "aspect_1e4", "one_pixel"])
@@ -293,7 +335,6 @@ def test_any_number_of_channels_and_direct_call():
     for c in (1, 2, 40):
         ch = torch.rand(m, c, generator=torch.Generator().manual_seed(c))
         out, t = rasterize_cpu(proj, ch, cam.width, cam.height)
-        from gsbench.render.torch_backend import rasterize_torch
         ref_out, ref_t = rasterize_torch(proj, ch, cam.width, cam.height)
         assert out.shape == (20, 20, c)
         assert (out - ref_out).abs().max() <= 1e-5 and (t - ref_t).abs().max() <= 1e-6

@@ -269,3 +269,22 @@ def test_pareto_pearson_and_train_curve(tmp_path: Path):
         f.write('{"phase": "rgb", "step": 2, "wall_s": 4.0}\n')
         f.write('{"phase": "semantic", "step": 1, "wall_s": 1.5, "eval": {"psnr": 6.0}}\n')
     assert train_curve(str(d), ["psnr"]) == ([3.0, 5.5], [5.0, 6.0])
+
+
+def test_lambda_slice_keeps_one_sweep(tmp_path: Path):
+    """Two sweeps (depth x sem, tv x ds) around defaults: the depth x sem surface uses only the runs
+    with tv and ds at their default (the most common value), never runs of the other sweep."""
+    from gsbench.reports.plots import _lambda_slice
+    from gsbench.reports.spec import AX_LAMBDAS
+    root = tmp_path / "runs"
+    cells = {(d, 1.5, s, 1.0) for d in (0.001, 0.01, 0.1) for s in (1.0, 5.0)}
+    cells |= {(0.01, t, 5.0, ds) for t in (0.5, 3.0) for ds in (0.25, 2.0)}
+    for i, (d, t, s, ds) in enumerate(sorted(cells)):
+        write_run(root, f"c{i}", method="gaussiands", scene="b", study="lambda_grid",
+                  grid={"gaussiands.lambdas.depth": d, "gaussiands.lambdas.tv": t,
+                        "gaussiands.lambdas.sem": s, "gaussiands.lambdas.ds": ds}, metrics={"miou_3dovs": 0.5})
+    res = Results(collect(root))
+    ids = res.run_ids(study="lambda_grid")
+    sl = _lambda_slice(res, ids, AX_LAMBDAS, AX_LAMBDAS[::2])  # keep depth and sem
+    assert len(ids) == 10 and len(sl) == 6
+    assert all(res.runs.at[r, "axis.gaussiands.lambdas.tv"] == 1.5 for r in sl)

@@ -17,7 +17,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, help="RUNS_DIR: one run folder per cell, shared scenes and priors cache")
     parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
                         help="override config keys in every cell (e.g. train.iterations=30); may not be a grid axis")
-    parser.add_argument("--executor", choices=["local", "submitit"], default="local")
+    parser.add_argument("--executor", choices=["local", "submitit", "serial"], default="local",
+                        help="local = process pool (--jobs), submitit = SLURM job arrays (--cluster), "
+                        "serial = this process, one cell after another (debugging)")
     parser.add_argument("--jobs", type=int, default=1, help="local: worker processes (one cell each); "
                         "submitit/slurm: max concurrently running array tasks")
     parser.add_argument("--cluster", choices=["slurm", "local", "debug"], default="slurm",
@@ -30,6 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--status", action="store_true", help="print the state of every cell and exit")
     parser.add_argument("--dry-run", action="store_true", help="list the cells (and their run ids) without running")
     parser.add_argument("--list", action="store_true", help="list the shipped grids")
+    parser.add_argument("--no-shared-priors", action="store_true",
+                        help="do not compute priors shared by several cells once before the cells run")
     parser.add_argument("--no-progress", action="store_true")
 
 
@@ -65,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
         slurm = {k: v for k, v in slurm.items() if not k.startswith("slurm_")}
     executor = make_executor(args.executor, jobs=args.jobs, folder=args.out / ".submitit", cluster=args.cluster,
                              progress=not args.no_progress, **slurm)
-    report = grids.run_grid(grid, args.out, executor, retry_failed=args.retry_failed)
+    report = grids.run_grid(grid, args.out, executor, retry_failed=args.retry_failed,
+                            share_priors=not args.no_shared_priors)
     rows = grids.status_rows(args.out, grid)
     print(grids.format_status(rows))
     failed = [r for r in report.results if r and r.get("state") != "done"]

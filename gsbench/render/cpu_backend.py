@@ -162,8 +162,13 @@ def rasterize_cpu(proj: Projected, channels: torch.Tensor, width: int, height: i
     if n_ch < 1:
         raise ValueError("rasterize_cpu: channels needs at least one column")
     if m == 0:
-        out = channels.sum() * 0.0 + torch.zeros(height, width, n_ch, dtype=dtype)
-        return out, torch.ones(height, width, dtype=dtype)
+        out = torch.zeros(height, width, n_ch, dtype=dtype)
+        t_final = torch.ones(height, width, dtype=dtype)
+        if torch.is_grad_enabled() and (channels.requires_grad or opacities.requires_grad):
+            # nothing visible: stay attached to the graph (exact zero gradients), as the reference does
+            out = out + channels[:0].sum()
+            t_final = t_final + opacities[:0].sum()
+        return out, t_final
     if width * height > 2**31 - 1 or not math.isfinite(width * height):
         raise ValueError(f"rasterize_cpu: image {width}x{height} is too large")
     radii = proj.radii[proj.ids]

@@ -1,0 +1,234 @@
+"""Running grids: skip finished cells, resume stale ones, retry failed ones; the kill-and-resume
+check through `gsbench ablate --jobs 2`, and the submitit executor in its local mode."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from gsbench import grids
+from gsbench.executors import SerialExecutor
+from gsbench.store import read_json, write_json_atomic
+
+TINY_SCENE = {"preset": "tabletop-small", "views": 9, "resolution": [32, 24]}
+
+
+def _write_grid(path: Path, **kw) -> Path:
+    raw = {"study": "tiny-test", "base": {"method": "vanilla", "preset": "cpu-small",
+                                          "set": {"train.iterations": 5, "train.max_width": 32}},
+           "scenes": [TINY_SCENE], "seeds": [0],
+           "axes": {"train.lr.color": [0.0025, 0.005], "train.lambda_dssim": [0.2, 0.0]}}
+    raw.update(kw)
+    path.write_text(yaml.safe_dump(raw, sort_keys=False))
+    return path
+
+
+# ------------------------------------------------------------------------- machinery (fake runner)
+def test_skip_failed_retry_and_stale(tmp_path, monkeypatch):
+    calls: list[str] = []
+    fail = {"on": None}
+
+    def fake(spec, run_dir, status):
+        calls.append(run_dir.name)
+        if run_dir.name == fail["on"]:
+            raise RuntimeError("simulated failure")
+        write_json_atomic(run_dir / "results.json", {"metrics": {}})
+
+    monkeypatch.setattr(grids, "_train_and_evaluate", fake)
+    grid = grids.load_grid(_write_grid(tmp_path / "g.yaml"))
+    out = tmp_path / "runs"
+    planned = grids.plan(grid, out)
+    ids = [pc.run_id for pc in planned]
+    assert len(set(ids)) == 4
+    assert (out / "scenes" / "tabletop-small-0-32x24-v9").is_dir()          # preset generated once
+    fail["on"] = ids[1]
+    rep = grids.run_grid(grid, out, SerialExecutor(progress=False), log=lambda s: None)
+    assert sorted(rep.dispatched) == sorted(ids) and sorted(calls) == sorted(ids)
+    st = read_json(out / ids[1] / grids.CELL_STATUS_FILE)
+    assert st["state"] == "failed" and "simulated failure" in st["error"] and "Traceback" in st["traceback"]
+
+    # re-run: finished cells and the failed one are left alone
+    calls.clear()
+    rep = grids.run_grid(grid, out, SerialExecutor(progress=False), log=lambda s: None)
+    assert rep.dispatched == [] and calls == []
+
+    # --retry-failed runs only the failed cell
+    fail["on"] = None
+    rep = grids.run_grid(grid, out, SerialExecutor(progress=False), retry_failed=True, log=lambda s: None)
+    assert rep.dispatched == [ids[1]] and calls == [ids[1]]
+    assert read_json(out / ids[1] / grids.CELL_STATUS_FILE)["attempt"] == 2
+
+    # a cell whose worker died (running, dead pid) is stale and runs again; a live one is not touched
+    calls.clear()
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    write_json_atomic(out / ids[2] / grids.CELL_STATUS_FILE,
+                      {"state": "running", "pid": dead.pid, "host": os.uname().nodename, "heartbeat": time.time()})
+    write_json_atomic(out / ids[3] / grids.CELL_STATUS_FILE,
+                      {"state": "running", "pid": os.getpid(), "host": os.uname().nodename, "heartbeat": time.time()})
+    rep = grids.run_grid(grid, out, SerialExecutor(progress=False), log=lambda s: None)
+    assert calls == [ids[2]]
+
+    # status table: from the grid plan, and from the folder alone
+    rows = grids.status_rows(out, grid)
+    assert sorted(r["state"] for r in rows) == ["done", "done", "done", "running"]
+    assert len(grids.status_rows(out)) == 4
+    manifest = json.loads((out / "grid-g.json").read_text())
+    assert sorted(c["run_id"] for c in manifest["cells"]) == sorted(ids)
+    assert manifest["axis_keys"] == ["train.lr.color", "train.lambda_dssim"]
+
+
+def test_cell_configs_share_cache_and_record_grid(tmp_path):
+    grid = grids.load_grid(_write_grid(tmp_path / "g.yaml"))
+    planned = grids.plan(grid, tmp_path / "runs")
+    caches = {pc.config["priors"]["cache_dir"] for pc in planned}
+    assert caches == {str((tmp_path / "runs" / ".gsbench_cache").resolve())}
+    grids_rec = [pc.config["grid"] for pc in planned]
+    assert {(g["train.lr.color"], g["train.lambda_dssim"]) for g in grids_rec} == {
+        (0.0025, 0.2), (0.0025, 0.0), (0.005, 0.2), (0.005, 0.0)}
+    assert all(pc.config["study"] == "tiny-test" and pc.config["train"]["iterations"] == 5 for pc in planned)
+    # the same grid in the same folder gives the same run ids (a re-run finds its cells)
+    again = grids.plan(grid, tmp_path / "runs")
+    assert [pc.run_id for pc in again] == [pc.run_id for pc in planned]
+
+
+def test_status_before_any_run_is_pending(tmp_path):
+    grid = grids.load_grid(_write_grid(tmp_path / "g.yaml"))
+    (tmp_path / "runs").mkdir()
+    rows = grids.status_rows(tmp_path / "runs", grid)        # scenes not generated yet: nothing created
+    assert [r["state"] for r in rows] == ["pending"] * 4
+    assert not (tmp_path / "runs" / "scenes").exists()
+
+
+# ------------------------------------------------------------------------- real runs
+def _gsbench(*args: str) -> list[str]:
+    return [sys.executable, "-m", "gsbench.cli", *args]
+
+
+def _done_cells(out: Path) -> list[Path]:
+    done = []
+    for st in out.glob(f"*/{grids.CELL_STATUS_FILE}"):
+        try:
+            if json.loads(st.read_text()).get("state") == "done":
+                done.append(st.parent)
+        except ValueError:
+            pass
+    return done
+
+
+def _snapshot(d: Path) -> dict:
+    return {name: ((d / name).stat().st_mtime_ns, (d / name).read_bytes())
+            for name in ("results.json", "train_log.jsonl", "model.pt", "checkpoint.pt") if (d / name).exists()}
+
+
+@pytest.mark.slow
+def test_vanilla_cell_real_results(tmp_path):
+    """One real cell (vanilla, 5 iterations) run in-process: results.json follows the schema."""
+    grid = grids.load_grid(_write_grid(tmp_path / "g.yaml", axes={"train.lambda_dssim": [0.2]}))
+    rep = grids.run_grid(grid, tmp_path / "runs", SerialExecutor(progress=False), log=lambda s: None)
+    assert [r["state"] for r in rep.results] == ["done"], rep.results
+    res = read_json(tmp_path / "runs" / rep.dispatched[0] / "results.json")
+    for key in ("run_id", "method", "scene", "scene_path", "seed", "study", "grid", "config", "providers", "backend",
+                "protocol", "metric_impl", "metrics", "per_view", "view_names", "skipped", "timings", "memory",
+                "machine", "status", "dropped"):
+        assert key in res, key
+    assert res["study"] == "tiny-test" and res["grid"] == {"train.lambda_dssim": 0.2}
+    assert res["method"] == "vanilla" and res["status"] == "done"
+    assert len(res["per_view"]["psnr"]) == len(res["view_names"]) == 2      # views 0 and 8 of 9 are test views
+    assert 5.0 < res["metrics"]["psnr"] < 60.0
+    assert res["metrics"]["fps"] > 0 and res["timings"]["train_s"] > 0 and res["memory"]["peak_rss_mb"] > 0
+    # vanilla has no semantic field: segmentation and removal are skipped with reasons, values null
+    assert res["metrics"]["miou_3dovs"] is None and "3dovs_encode" in res["skipped"]
+    assert "removal" in res["skipped"] and res["metrics"].get("removal_residual") is None
+    assert res["metrics"]["lpips"] is None or res["metric_impl"]["lpips"]
+    assert "lpips" in res["metric_impl"] or "lpips" in res["skipped"]
+
+
+@pytest.mark.slow
+def test_ablate_kill_and_resume(tmp_path):
+    """The shipped tiny grid (2 axes x 2 values, 300 iterations on tabletop-small) with --jobs 2:
+    SIGKILL the whole process group once some but not all cells are done, re-run, and check that
+    finished cells were not re-trained and every cell ends done."""
+    out = tmp_path / "runs"
+    args = _gsbench("ablate", "--grid", "tiny-test", "--out", str(out), "--jobs", "2",
+                    "--set", "train.max_width=32", "--no-progress")
+    log = open(tmp_path / "first.log", "w")
+    proc = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    deadline = time.time() + 1500
+    done: list[Path] = []
+    while time.time() < deadline:
+        done = _done_cells(out)
+        if done:
+            break
+        if proc.poll() is not None:
+            pytest.fail(f"ablate exited ({proc.returncode}) before any cell finished: "
+                        + (tmp_path / "first.log").read_text()[-2000:])
+        time.sleep(0.2)
+    assert done, "no cell finished in time"
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    log.close()
+    done = _done_cells(out)
+    assert 1 <= len(done) < 4, f"{len(done)} cells done when killed; the test needs a partial grid"
+    before = {d.name: _snapshot(d) for d in done}
+    unfinished = [d for d in out.iterdir() if (d / grids.CELL_FILE).exists() and d not in done]
+
+    rerun = subprocess.run(args, capture_output=True, text=True, timeout=3000)
+    assert rerun.returncode == 0, rerun.stdout[-3000:] + rerun.stderr[-3000:]
+    assert f"dispatching {4 - len(before)}" in rerun.stdout
+    assert len(_done_cells(out)) == 4
+    for name, snap in before.items():
+        assert _snapshot(out / name) == snap, f"finished cell {name} was touched by the re-run"
+        assert read_json(out / name / grids.CELL_STATUS_FILE)["attempt"] == 1
+    for d in unfinished:                      # started before the kill: resumed in a second attempt
+        st = read_json(d / grids.CELL_STATUS_FILE)
+        assert st["state"] == "done" and st["attempt"] == 2
+    status = subprocess.run(_gsbench("ablate", "--status", "--grid", "tiny-test", "--out", str(out),
+                                     "--set", "train.max_width=32"), capture_output=True, text=True)
+    assert status.returncode == 0 and "4 cells: done 4" in status.stdout
+
+
+@pytest.mark.slow
+def test_ablate_submitit_local(tmp_path):
+    """The same tiny grid through the submitit executor in its local mode (job array)."""
+    out = tmp_path / "runs"
+    r = subprocess.run(_gsbench("ablate", "--grid", "tiny-test", "--out", str(out), "--executor", "submitit",
+                                "--cluster", "local", "--timeout-min", "60",
+                                "--set", "train.iterations=30", "train.max_width=32", "--no-progress"),
+                       capture_output=True, text=True, timeout=3000)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "4 cells: done 4" in r.stdout
+    cells = [d for d in out.iterdir() if (d / grids.CELL_FILE).exists()]
+    assert len(cells) == 4
+    pids = set()
+    for d in cells:
+        res = read_json(d / "results.json")
+        assert res["study"] == "tiny-test" and set(res["grid"]) == {"gaussiands.latent_dim", "gaussiands.losses.ds"}
+        assert res["config"]["train"]["iterations"] == 30
+        pids.add(read_json(d / grids.CELL_STATUS_FILE)["pid"])
+    assert os.getpid() not in pids and (out / ".submitit").is_dir()
+
+
+def test_priors_requests_group_cells_that_share_priors(tmp_path):
+    grid = grids.load_grid(_write_grid(
+        tmp_path / "g.yaml", base={"method": "gaussiands", "preset": "cpu-small",
+                                   "set": {"train.iterations": 5, "train.max_width": 32}},
+        axes={"gaussiands.latent_dim": [3, 6], "gaussiands.losses.tv": [True, False]},
+        extra_cells=[{"method": "vanilla"}, {"method": "twostage"}, {"priors.ordering": "random"}]))
+    planned = grids.plan(grid, tmp_path / "runs")
+    reqs = {pc.cell.method + str(pc.cell.axes): grids.priors_request(pc.spec()) for pc in planned}
+    gaussiands = [json.dumps(r, sort_keys=True) for k, r in reqs.items()
+                  if k.startswith("gaussiands") and "random" not in k]
+    assert len(gaussiands) == 4 and len(set(gaussiands)) == 1   # d and L_tv do not change the priors
+    assert reqs["vanilla{'method': 'vanilla'}"] is None
+    two = reqs["twostage{'method': 'twostage'}"]
+    assert two["per_frame"] is True and two["need_depth"] is False
+    rnd = [r for k, r in reqs.items() if "random" in k][0]
+    assert rnd["priors"]["ordering"] == "random" and json.dumps(rnd, sort_keys=True) not in gaussiands

@@ -1,0 +1,196 @@
+"""Masks: simulated per-frame segments, gt masks, propagation (flow / reproject), mask IoU."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gsbench.errors import InputError
+from gsbench.priors import masks as M
+from gsbench.priors import prepare_priors
+from gsbench.priors import propagation as P
+
+sys.path.insert(0, str(Path(__file__).parent))
+from test_priors_scene import make_sphere_scene  # noqa: E402
+
+
+def same_partition(a, b):
+    """True when two label maps split the pixels identically (ids may differ)."""
+    if not np.array_equal(a < 0, b < 0):
+        return False
+    pairs = np.unique(np.stack([a[a >= 0], b[b >= 0]], 1), axis=0)
+    return len(pairs) == len(np.unique(a[a >= 0])) == len(np.unique(b[b >= 0]))
+
+
+def test_iou_matrix_hand_computed():
+    a = np.array([[0, 0, 1, -1]])
+    b = np.array([[5, 5, 5, 1]])
+    ids_a, ids_b, iou = P.iou_matrix(a, b)
+    assert list(ids_a) == [0, 1] and list(ids_b) == [1, 5]
+    # a=0: {0,1}; a=1: {2}; b=1: {3}; b=5: {0,1,2}
+    assert np.allclose(iou, [[0.0, 2 / 3], [0.0, 1 / 3]])
+    known = np.array([[True, False, True, True]])
+    _, _, iou_k = P.iou_matrix(a, b, known)
+    assert np.allclose(iou_k, [[0.0, 1 / 2], [0.0, 1 / 2]])
+
+
+def test_match_segments_hungarian_and_threshold():
+    warped = np.array([[0, 0, 0, 1, 1, 1, 2, -1]])
+    seg = np.array([[7, 7, 7, 7, 3, 3, 9, 9]])
+    known = np.ones_like(warped, bool)
+    m = P.match_segments(warped, known, seg, min_iou=0.3)
+    # 7<->0 (iou 3/4), 3<->1 (2/3), 9<->2 (iou 1/2)
+    assert m == {7: 0, 3: 1, 9: 2}
+    assert P.match_segments(warped, known, seg, min_iou=0.6) == {7: 0, 3: 1}
+
+
+def test_simulated_severity_zero_is_a_relabelling_of_gt():
+    scene = make_sphere_scene(2, 64, 48)
+    inst = scene.gt_instances(0)
+    seg = M.simulate_segments(inst, 0, np.random.default_rng(1))
+    assert seg.dtype == np.int32 and same_partition(seg, inst)
+
+
+def test_simulated_failures_grow_with_severity_and_are_seeded():
+    scene = make_sphere_scene(2, 96, 72)
+    inst = scene.gt_instances(1)
+    disagree = []
+    for sev in (1, 3, 5):
+        segs = [M.simulate_segments(inst, sev, np.random.default_rng(s)) for s in range(6)]
+        # fraction of pixels whose (segment -> majority GT instance) label is wrong
+        errs = []
+        for seg in segs:
+            wrong = 0
+            for s in np.unique(seg[seg >= 0]):
+                vals, cnt = np.unique(inst[seg == s], return_counts=True)
+                wrong += cnt.sum() - cnt.max()
+            wrong += np.sum((seg < 0) != (inst < 0))
+            errs.append(wrong / inst.size)
+        disagree.append(np.mean(errs))
+    assert 0 < disagree[0] < disagree[1] < disagree[2]
+    a = M.simulate_segments(inst, 2, np.random.default_rng(3))
+    b = M.simulate_segments(inst, 2, np.random.default_rng(3))
+    assert np.array_equal(a, b)
+
+
+def test_simulated_ids_permuted_per_view():
+    scene = make_sphere_scene(4, 64, 48)
+    p = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0}}, list(range(8)), (64, 48), None,
+                       False, True, False, per_frame_masks=True, progress=False)
+    assert p.providers["masks"].endswith("per-frame")
+    assert p.stats["ordering_adjacent_mask_iou"] is None and "ordering_adjacent_mask_iou" in p.skipped
+    # per-view segment ids of the same GT instance vary across views (ids mean nothing across views)
+    ids_of_floor = {int(np.bincount(p.masks[v][scene.gt_instances(v) == 4]).argmax()) for v in range(8)}
+    assert len(ids_of_floor) > 1
+
+
+def gt_to_track(scene, tracks, views, min_area=30):
+    """{gt instance: set of track ids} over views where the instance covers >= min_area px."""
+    out = {}
+    for v in views:
+        inst = scene.gt_instances(v)
+        for i in np.unique(inst[inst >= 0]):
+            m = inst == i
+            if m.sum() < min_area:
+                continue
+            t = np.bincount(tracks[v][m][tracks[v][m] >= 0]).argmax()
+            out.setdefault(int(i), set()).add(int(t))
+    return out
+
+
+@pytest.mark.parametrize("propagator", ["reproject", "flow"])
+def test_propagation_makes_ids_consistent(propagator):
+    # dense views on one ring (6 degree steps): each GT object keeps one track id everywhere
+    scene = make_sphere_scene(12, 96, 72, arc_deg=66.0, heights=(1.5,))
+    views = list(range(12))
+    p = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0, "propagator": propagator}},
+                       views, (96, 72), None, False, True, False, progress=False)
+    assert p.providers["masks"] == f"simulated-v1:s0+{propagator}"
+    m = gt_to_track(scene, p.masks, views)
+    assert len(m) >= 4 and all(len(t) == 1 for t in m.values())
+    assert p.stats["ordering_adjacent_mask_iou"] > 0.9
+    # the unpropagated per-frame segments are not consistent
+    q = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0}}, views, (96, 72), None,
+                       False, True, False, per_frame_masks=True, progress=False)
+    assert any(len(t) > 1 for t in gt_to_track(scene, q.masks, views).values())
+
+
+def test_adjacent_mask_iou_reference_values():
+    scene = make_sphere_scene(6, 96, 72, arc_deg=60.0, heights=(1.5,))
+    views = list(range(6))
+    cams = {v: scene.cameras[v] for v in views}
+    depths = {v: scene.gt_depth(v) for v in views}
+    valids = {v: depths[v] > 0 for v in views}
+    gt = {v: scene.gt_instances(v) for v in views}
+    # GT instances are perfectly consistent: IoU close to 1 (only pixel quantisation at edges)
+    assert P.adjacent_mask_iou(gt, views, cams, depths, valids) > 0.9
+    # give every view its own ids: no id is shared -> exactly 0
+    own = {v: np.where(gt[v] >= 0, gt[v] + 100 * v, -1) for v in views}
+    assert P.adjacent_mask_iou(own, views, cams, depths, valids) == 0.0
+    # no labels at all: nothing to score
+    empty = {v: np.full_like(gt[v], -1) for v in views}
+    assert P.adjacent_mask_iou(empty, views, cams, depths, valids) is None
+
+
+def test_gt_masks_are_gt_instances():
+    scene = make_sphere_scene(3, 64, 48, arc_deg=30.0, heights=(1.5,))
+    p = prepare_priors(scene, {"masks": {"provider": "gt"}}, [0, 1, 2], (64, 48), None, False, True, False,
+                       progress=False)
+    assert p.providers["masks"] == "gt-instances"
+    for v in (0, 1, 2):
+        assert np.array_equal(p.masks[v], scene.gt_instances(v))
+    assert p.stats["ordering_adjacent_mask_iou"] > 0.8
+
+
+def test_masks_at_image_size_nearest():
+    scene = make_sphere_scene(2, 64, 48)
+    p = prepare_priors(scene, {"masks": {"provider": "gt"}}, [0], (32, 24), None, False, True, False, progress=False)
+    assert p.masks[0].shape == (24, 32)
+    assert set(np.unique(p.masks[0])) <= set(np.unique(scene.gt_instances(0)))
+
+
+def test_mask_errors(tmp_path):
+    scene = make_sphere_scene(2, 16, 12)
+    with pytest.raises(InputError, match="priors.masks.provider"):
+        prepare_priors(scene, {"masks": {"provider": "magic"}}, [0], (16, 12), None, False, True, False, progress=False)
+    with pytest.raises(InputError, match="priors.masks.propagator"):
+        prepare_priors(scene, {"masks": {"propagator": "teleport"}}, [0, 1], (16, 12), None, False, True, False,
+                       progress=False)
+    missing = tmp_path / "sam2.1_hiera_tiny.pt"
+    with pytest.raises(InputError) as e:
+        prepare_priors(scene, {"masks": {"provider": "sam2", "checkpoint": str(missing),
+                                         "model_config": "configs/sam2.1/sam2.1_hiera_t.yaml"}},
+                       [0], (16, 12), None, False, True, False, progress=False)
+    msg = str(e.value)
+    assert "\n" not in msg and "priors.masks.checkpoint" in msg and str(missing) in msg
+    assert "priors.masks.provider=sam2" in msg
+    no_depth = make_sphere_scene(2, 16, 12)
+    no_depth.depth_loader = None
+    with pytest.raises(InputError, match="reproject"):
+        prepare_priors(no_depth, {"masks": {"propagator": "reproject"}}, [0, 1], (16, 12), None, False, True, False,
+                       progress=False)
+    no_inst = make_sphere_scene(2, 16, 12)
+    no_inst.instances_loader = None
+    with pytest.raises(InputError, match="GT instances"):
+        prepare_priors(no_inst, {"masks": {"provider": "simulated"}}, [0], (16, 12), None, False, True, False,
+                       progress=False)
+
+
+def test_mask_iou_skipped_without_gt_depth():
+    scene = make_sphere_scene(2, 32, 24)
+    scene.depth_loader = None
+    p = prepare_priors(scene, {"masks": {"provider": "gt"}}, [0, 1], (32, 24), None, False, True, False,
+                       progress=False)
+    assert p.stats["ordering_adjacent_mask_iou"] is None
+    assert "GT depth" in p.skipped["ordering_adjacent_mask_iou"]
+
+
+def test_labels_from_masks_small_on_top():
+    big = np.zeros((4, 4), bool)
+    big[:, :3] = True
+    small = np.zeros((4, 4), bool)
+    small[1, 1] = True
+    lab = M._labels_from_masks([small, big], (4, 4))
+    assert lab[1, 1] != lab[0, 0] and lab[0, 0] >= 0 and lab[0, 3] == -1
