@@ -45,7 +45,7 @@ def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, 
     cams: dict[str, Camera] = {}
     distorted = []
     for _, im in rec.images.items():
-        if not im.has_pose:
+        if not getattr(im, "has_pose", True):  # pycolmap >= 3.12: frames may be unregistered
             continue
         c = im.camera
         model = str(c.model_name)
@@ -55,7 +55,9 @@ def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, 
         ifx, ify, icx, icy = _PINHOLE_LIKE[model]
         K = np.array([[p[ifx], 0.0, p[icx]], [0.0, p[ify], p[icy]], [0.0, 0.0, 1.0]])
         w2c = np.eye(4)
-        w2c[:3, :4] = np.asarray(im.cam_from_world().matrix(), dtype=np.float64)
+        cfw = im.cam_from_world
+        cfw = cfw() if callable(cfw) else cfw  # a method in pycolmap 4, a property before
+        w2c[:3, :4] = np.asarray(cfw.matrix(), dtype=np.float64)
         meta = {"colmap_model": model}
         n_intr = 3 if ifx == ify else 4
         dist = p[n_intr:].tolist()
@@ -80,7 +82,8 @@ def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, 
 
 def write_colmap(model_dir: Path, cameras: list[Camera], names: list[str], points: np.ndarray | None = None,
                  colors: np.ndarray | None = None, binary: bool = True) -> None:
-    """Write a PINHOLE COLMAP model (one camera per image) with optional coloured points."""
+    """Write a PINHOLE COLMAP model (one camera per image) with optional coloured points.
+    Uses the rig / frame API of pycolmap >= 3.12."""
     import pycolmap
 
     model_dir = Path(model_dir)

@@ -241,6 +241,9 @@ def _attach_synthetic(scene: Scene, root: Path) -> None:
     if not scene.class_names:
         scene.class_names = list(meta.get("class_names", []))  # index space of instance_classes
     scene.meta["synthetic"] = meta.get("generator", {})
+    for k in ("near", "far"):  # nearest / farthest surface depth over all views
+        if k in meta:
+            scene.meta[k] = float(meta[k])
     scene.meta["depth_format"] = "float32 .npy, camera-space z, 0 where no surface"
 
 

@@ -31,6 +31,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from gsbench.errors import InputError
@@ -472,8 +473,6 @@ def _label_json(name: str, W: int, H: int, cmap: np.ndarray, classes: list[str],
         group += 1
         for poly in mask_to_polygons(m):
             pm = np.zeros((H, W), np.uint8)
-            import cv2
-
             cv2.fillPoly(pm, [poly.reshape(-1, 1, 2)], 1)
             objs.append({"category": c, "group": group, "segmentation": poly.tolist(), "area": float(pm.sum()),
                          "layer": float(group), "bbox": [float(v) for v in (*poly.min(0), *poly.max(0))],
@@ -549,8 +548,10 @@ def _write(spec: SceneSpec, root: Path, scene_name: str, preset: str, seed: int,
             d = r["depth"][r["depth"] > 0]
             bounds.append([0.9 * float(d.min()), 1.1 * float(d.max())] if d.size else [0.1, FAR])
         write_poses_bounds(root / "poses_bounds.npy", cams, np.array(bounds))
+    all_d = np.concatenate([r["depth"][r["depth"] > 0] for r in renders])
     meta = {
         "format": "gsbench-synthetic", "version": GENERATOR_VERSION,
+        "near": float(all_d.min()), "far": float(all_d.max()),
         "generator": {"preset": preset, "seed": seed, "views": n, "resolution": [W, H], "layout": layout},
         "image_names": names, "train_ids": train, "test_ids": test,
         "class_names": classes, "queries": label_classes,

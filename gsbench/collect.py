@@ -220,6 +220,9 @@ def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
         if not isinstance(block, dict):
             raise InputError(f"{path}: '{section}' must be an object")
         for m, v in block.items():
+            # descriptive entries (e.g. "fps_sync": "none (cpu, synchronous)") are not quantities
+            if isinstance(v, (str, bool, dict, list)):
+                continue
             if m not in present:
                 entries.append((m, v, section))
                 present.add(m)

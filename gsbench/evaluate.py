@@ -408,9 +408,11 @@ def _removal(method, scene, test_ids, cams, config, metrics, per_view, metric_im
     from gsbench.metrics.image import quantize_uint8
     if not (scene.has_removal and scene.has_instances and scene.instance_classes):
         skipped["removal"] = "scene has no removal ground truth (synthetic scenes only)"
+        metrics["removal_residual"] = metrics["removal_psnr_outside"] = None
         return
-    if config.get("method") == "vanilla":
-        skipped["removal"] = "method vanilla has no semantic field to select objects"
+    if _text(method, ["object"], "encode") is None:
+        skipped["removal"] = f"method {config.get('method')}: this run has no semantic field to select objects"
+        metrics["removal_residual"] = metrics["removal_psnr_outside"] = None
         return
     by_class: dict = {}
     for inst, cls in scene.instance_classes.items():

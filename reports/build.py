@@ -160,6 +160,9 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         summary.notes.append("Studies without a table layout (time curves only): " + ", ".join(map(str, unknown)) + ".")
     for t in tables:
         summary.notes += [f"{t.title}: {n}" for n in t.notes]
+    for short, full in sorted(res.long_reasons.items()):
+        for f in sorted(full)[:5]:
+            summary.notes.append(f"n/a ({short}) in full: {f}")
 
     order = ["main"] + [k for k in STUDIES if k != "reconstruction"]
     ordered = [sections[k] for k in order if k in sections] + [s for k, s in sections.items() if k not in order]

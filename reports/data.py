@@ -53,6 +53,7 @@ class Results:
             self.values[(str(rid), str(m))] = (float(v) if not is_null(v) else math.nan,
                                                None if is_null(reason) else str(reason))
         self.axis_columns = [c for c in df.columns if c.startswith("axis.")]
+        self.long_reasons: dict[str, set[str]] = {}  # short reason shown in a cell -> full texts
 
     # ------------------------------------------------------------------ selection
     def run_ids(self, study: Any = "__any__", **eq: Any) -> list[str]:
@@ -126,8 +127,10 @@ class Results:
         else:
             uniq: list[str] = []
             for r in reasons:
-                if r not in uniq:
-                    uniq.append(r)
+                if short_reason(r) not in uniq:
+                    uniq.append(short_reason(r))
+                if short_reason(r) != r:
+                    self.long_reasons.setdefault(short_reason(r), set()).add(r)
             c.reason = "; ".join(uniq)
         return c
 
@@ -140,6 +143,13 @@ class Results:
             if c in self.runs.columns and len(self.distinct(c, run_ids)) > 1:
                 return True
         return False
+
+
+def short_reason(reason: str) -> str:
+    """The head of a reason for a table cell ("no LPIPS weights: backbone ... not found" ->
+    "no LPIPS weights"); the full text is listed in the report's notes."""
+    head = reason.split(": ", 1)[0].strip()
+    return head if len(head) >= 3 else reason
 
 
 def mean_of_cells(cells: list[Cell], names: list[str], decimals: int) -> Cell:

@@ -213,7 +213,8 @@ def _method_scene_table(res: Results, ids: list[str], metrics: list[str], tid: s
 def ablation_table(res: Results, study: str, tid: str, title: str, caption: str, row_axes: list[str],
                    label_headers: list[str], metrics: list[str], checks: bool = False,
                    row_sort: Callable[[tuple], Any] | None = None,
-                   row_labels: Callable[[tuple], list[str]] | None = None) -> list[Table]:
+                   row_labels: Callable[[tuple], list[str]] | None = None,
+                   label_headers_latex: list[str] | None = None) -> list[Table]:
     """Rows = distinct values of the study's axes (plus method and any unexpected varying axis),
     column groups = scenes (with a mean over the scenes of each protocol), columns = metrics.
     Logical metrics ('miou', 'mbiou') resolve per protocol; best per column bold."""
@@ -302,6 +303,8 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
     if not multi and pairs:
         cap += f" Scene: {pairs[0][0]} ({PROTOCOL_SHORT.get(pairs[0][1], pairs[0][1])})."
     t = Table(tid, title, cap, heads, columns, rows, label_is_check=checks and not (n_method or extra))
+    if label_headers_latex and not (n_method or extra):
+        t.label_headers_latex = label_headers_latex
     if dropped:
         t.notes.append("Not evaluated, column left out: " + ", ".join(dropped) + ".")
     t.bold_best_per_column()
@@ -348,7 +351,9 @@ def loss_subsets_table(res: Results) -> list[Table]:
     return ablation_table(
         res, "loss_subsets", "loss_subsets", "Loss subsets",
         "Ablation of the loss components L_depth, L_tv and L_ds (check mark = term on).",
-        AX_LOSSES, ["L_depth", "L_tv", "L_ds"], ["psnr", "miou"], checks=True, row_sort=order)
+        AX_LOSSES, ["L_depth", "L_tv", "L_ds"], ["psnr", "miou"], checks=True, row_sort=order,
+        label_headers_latex=["$\\mathcal{L}_{\\mathrm{depth}}$", "$\\mathcal{L}_{\\mathrm{tv}}$",
+                             "$\\mathcal{L}_{\\mathrm{ds}}$"])
 
 
 def noise_table(res: Results) -> list[Table]:

@@ -84,6 +84,7 @@ class Table:
     rows: list[Row] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     label_is_check: bool = False  # the label columns are check marks (loss subsets)
+    label_headers_latex: list[str] | None = None  # LaTeX source of the label headers (else escaped)
 
     # ---------------------------------------------------------------- bold marks
     def bold_best_per_column(self) -> None:
@@ -157,7 +158,7 @@ class Table:
                 sep = "|" if i < len(spans) - 1 else ""
                 parts.append(f"\\multicolumn{{{k}}}{{c{sep}}}{{\\textit{{{gl if gl else _tex(g or '')}}}}}")
             out.append(" & ".join(parts) + " \\\\")
-        heads = [_tex(h) if not self.label_is_check else h for h in self.label_headers]
+        heads = list(self.label_headers_latex) if self.label_headers_latex else [_tex(h) for h in self.label_headers]
         heads += [c.header_latex() for c in self.columns]
         out.append(" & ".join(heads) + " \\\\")
         out.append("\\midrule")

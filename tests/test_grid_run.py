@@ -153,12 +153,12 @@ def test_vanilla_cell_real_results(tmp_path):
 
 @pytest.mark.slow
 def test_ablate_kill_and_resume(tmp_path):
-    """The shipped tiny grid (2 axes x 2 values, 300 iterations on tabletop-small) with --jobs 2:
-    SIGKILL the whole process group once some but not all cells are done, re-run, and check that
-    finished cells were not re-trained and every cell ends done."""
+    """The shipped tiny grid (2 axes x 2 values on tabletop-small; iterations cut to 40 and width to
+    32 px to bound CI time) with --jobs 2: SIGKILL the whole process group once some but not all
+    cells are done, re-run, and check that finished cells were not re-trained and all end done."""
     out = tmp_path / "runs"
-    args = _gsbench("ablate", "--grid", "tiny-test", "--out", str(out), "--jobs", "2",
-                    "--set", "train.max_width=32", "--no-progress")
+    sets = ["--set", "train.iterations=40", "train.max_width=32"]
+    args = _gsbench("ablate", "--grid", "tiny-test", "--out", str(out), "--jobs", "2", *sets, "--no-progress")
     log = open(tmp_path / "first.log", "w")
     proc = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     deadline = time.time() + 1500
@@ -190,8 +190,8 @@ def test_ablate_kill_and_resume(tmp_path):
     for d in unfinished:                      # started before the kill: resumed in a second attempt
         st = read_json(d / grids.CELL_STATUS_FILE)
         assert st["state"] == "done" and st["attempt"] == 2
-    status = subprocess.run(_gsbench("ablate", "--status", "--grid", "tiny-test", "--out", str(out),
-                                     "--set", "train.max_width=32"), capture_output=True, text=True)
+    status = subprocess.run(_gsbench("ablate", "--status", "--grid", "tiny-test", "--out", str(out), *sets),
+                            capture_output=True, text=True)
     assert status.returncode == 0 and "4 cells: done 4" in status.stdout
 
 

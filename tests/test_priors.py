@@ -159,3 +159,26 @@ def test_single_view(scene):
     p = run(scene, None, views=(3,))
     assert p.order == [3] and p.stats["ordering_adjacent_distance"] is None
     assert p.stats["ordering_adjacent_mask_iou"] is None
+
+
+@pytest.fixture(scope="module")
+def tiny_scene_dir(tmp_path_factory):
+    synthetic = pytest.importorskip("gsbench.datasets.synthetic")
+    return synthetic.make_scene("tabletop-small", tmp_path_factory.mktemp("cli") / "scene", seed=0, views=4,
+                                resolution=(32, 24))
+
+
+@pytest.mark.parametrize("flag,path,option", [
+    ("priors.depth.provider=depth-anything", "priors.depth.model_path", "da-v2-small"),
+    ("priors.masks.provider=sam2", "priors.masks.checkpoint", "sam2.1_hiera_tiny.pt"),
+    ("priors.features.provider=openclip", "priors.features.checkpoint", "vit_b16.bin"),
+])
+def test_cli_missing_weights_one_line(tiny_scene_dir, tmp_path, capsys, flag, path, option):
+    from gsbench.cli import main
+    missing = tmp_path / "weights" / option
+    rc = main(["train", "--method", "gaussiands", "--scene", str(tiny_scene_dir), "--preset", "cpu-small",
+               "--set", flag, "--set", f"{path}={missing}", "--out", str(tmp_path / "run"), "--no-progress"])
+    assert rc == 1
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1, lines
+    assert f"{path}: {missing} not found" in lines[0] and f"--set {flag}" in lines[0]

@@ -125,13 +125,13 @@ def test_adjacent_mask_iou_reference_values():
     valids = {v: depths[v] > 0 for v in views}
     gt = {v: scene.gt_instances(v) for v in views}
     # GT instances are perfectly consistent: IoU close to 1 (only pixel quantisation at edges)
-    assert P.adjacent_mask_iou(gt, views, cams, depths, valids) > 0.9
+    assert P.adjacent_mask_iou_all_ids(gt, views, cams, depths, valids) > 0.9
     # give every view its own ids: no id is shared -> exactly 0
     own = {v: np.where(gt[v] >= 0, gt[v] + 100 * v, -1) for v in views}
-    assert P.adjacent_mask_iou(own, views, cams, depths, valids) == 0.0
+    assert P.adjacent_mask_iou_all_ids(own, views, cams, depths, valids) == 0.0
     # no labels at all: nothing to score
     empty = {v: np.full_like(gt[v], -1) for v in views}
-    assert P.adjacent_mask_iou(empty, views, cams, depths, valids) is None
+    assert P.adjacent_mask_iou_all_ids(empty, views, cams, depths, valids) is None
 
 
 def test_gt_masks_are_gt_instances():

@@ -223,7 +223,7 @@ def test_float32_render_close_to_float64_reference():
 # ----------------------------------------------------------------------------- gradients
 def _smooth_scene(sh_degree=None):
     """A small scene away from every discontinuity (checked below with the reference)."""
-    cam = look_at(7, 5, eye=(0.2, -0.1, 3.0))
+    cam = look_at(6, 4, eye=(0.2, -0.1, 3.0), f=5.4)
     g = torch.Generator().manual_seed(3)
     n = 3
     means = (torch.rand(n, 3, generator=g, dtype=torch.float64) - 0.5) * 0.6
@@ -250,7 +250,9 @@ def test_gradcheck_float64(sh_degree):
         out = render(GaussianField(*tensors), cam, backend="torch")
         return out.rgb, out.depth, out.features, out.alpha
 
-    assert torch.autograd.gradcheck(fn, inputs, eps=1e-6, atol=1e-6, rtol=1e-4)
+    # full Jacobian check for RGB colours; the SH variant uses gradcheck's fast mode (random
+    # projections of the Jacobian) to keep the default test run short
+    assert torch.autograd.gradcheck(fn, inputs, eps=1e-6, atol=1e-6, rtol=1e-4, fast_mode=sh_degree is not None)
 
 
 def test_no_gradient_through_clamped_alpha():
@@ -258,7 +260,7 @@ def test_no_gradient_through_clamped_alpha():
     cam = identity_camera(1, 1, f=1.0)
     field = with_grad(field_of([0, 0, 2.0], [-5] * 3, [1, 0, 0, 0], [9.0]))
     out = render(field, cam, backend="torch")
-    assert abs(float(out.alpha[0, 0]) - rules.ALPHA_MAX) < 1e-15
+    assert abs(float(out.alpha[0, 0].detach()) - rules.ALPHA_MAX) < 1e-15
     out.alpha.sum().backward()
     assert float(field.opacity_logits.grad[0]) == 0.0
     # unclamped, the same set-up does get the gradient d(sigmoid)/dlogit
@@ -269,7 +271,7 @@ def test_no_gradient_through_clamped_alpha():
 
 def test_means2d_gradient_for_densification():
     field = random_field(40, 5, d=0)
-    field.means.data[0] = torch.tensor([0.0, 0.0, 100.0])        # far behind the camera: culled
+    field.means.data[0] = torch.tensor([0.0, 0.0, -100.0])       # far behind the camera: culled
     cam = look_at(20, 16, eye=(0, 0, -3.0))
     f = with_grad(field)
     out = render(f, cam, backend="torch")
@@ -341,8 +343,8 @@ EXTREME = {
     "one_gaussian": lambda: (random_field(1, 8, d=2, scale=(0.3, 0.5), spread=0.1), CAMERAS[0]()),
     "image_1x1": lambda: (random_field(30, 9, d=2, scale=(0.3, 1.0)), look_at(1, 1, eye=(0, 0, 3.0), f=2.0)),
     "no_gaussians": lambda: (random_field(0, 10, d=2), CAMERAS[0]()),
-    "all_behind_camera": lambda: (random_field(20, 11, d=2, spread=0.2), look_at(9, 7, eye=(0, 0, 0.05),
-                                                                                   target=(0, 0, 1.0))),
+    "all_behind_camera": lambda: (random_field(20, 11, d=2, spread=0.2), look_at(9, 7, eye=(0, 0, 0.5),
+                                                                                   target=(0, 0, 1.5))),
 }
 
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -81,32 +80,43 @@ def test_depth_lies_on_analytic_surfaces(gen):
         np.testing.assert_allclose(P[:, 1], WALL_Y, atol=2e-5)
 
 
+def _reprojection_median(s, i, j, cj=None):
+    """Median relative error between view i's depth carried into view j and view j's depth, where
+    the four pixels around the projection carry the source pixel's instance (same visible surface)."""
+    X, r, c = _backproject(s.cameras[i], s.gt_depth(i))
+    src_inst = s.gt_instances(i)[r, c]
+    cj = cj or s.cameras[j]
+    dj, ij = s.gt_depth(j).astype(np.float64), s.gt_instances(j)
+    uv, z = cj.project(X)
+    x, y = uv[:, 0] - 0.5, uv[:, 1] - 0.5  # continuous index of pixel centres
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    ok = (x0 >= 0) & (y0 >= 0) & (x0 + 1 < cj.width) & (y0 + 1 < cj.height) & (z > 0)
+    x, y, x0, y0, z, src_inst = x[ok], y[ok], x0[ok], y0[ok], z[ok], src_inst[ok]
+    nb = [(y0, x0), (y0, x0 + 1), (y0 + 1, x0), (y0 + 1, x0 + 1)]
+    same = np.all([ij[a, b] == src_inst for a, b in nb], axis=0) & np.all([dj[a, b] > 0 for a, b in nb], axis=0)
+    fx, fy = x - x0, y - y0
+    inv = [1.0 / np.maximum(dj[a, b], 1e-12) for a, b in nb]  # 1/z is bilinear in pixels on a plane
+    inv_i = (inv[0] * (1 - fx) * (1 - fy) + inv[1] * fx * (1 - fy) + inv[2] * (1 - fx) * fy + inv[3] * fx * fy)
+    assert same.sum() > 1000
+    return float(np.median(np.abs(z[same] * inv_i[same] - 1.0)))
+
+
 def test_reprojection_consistency(gen):
-    """Depth of view i back-projected into view j matches view j's depth where the same surface is
-    visible (the four neighbouring pixels carry the source pixel's instance)."""
+    """GT depth of view i, back-projected and moved into view j, matches view j's GT depth."""
+    from gsbench.scene import Camera
+
     out, _ = gen
     s = load_scene(out)
-    meds = []
-    for i, j in [(1, 2), (5, 7), (10, 13), (3, 20), (22, 23)]:
-        X, r, c = _backproject(s.cameras[i], s.gt_depth(i))
-        src_inst = s.gt_instances(i)[r, c]
-        cj = s.cameras[j]
-        dj, ij = s.gt_depth(j).astype(np.float64), s.gt_instances(j)
-        uv, z = cj.project(X)
-        x, y = uv[:, 0] - 0.5, uv[:, 1] - 0.5  # continuous index of pixel centres
-        x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
-        ok = (x0 >= 0) & (y0 >= 0) & (x0 + 1 < cj.width) & (y0 + 1 < cj.height) & (z > 0)
-        x, y, x0, y0, z, src_inst = x[ok], y[ok], x0[ok], y0[ok], z[ok], src_inst[ok]
-        nb = [(y0, x0), (y0, x0 + 1), (y0 + 1, x0), (y0 + 1, x0 + 1)]
-        same = np.all([ij[a, b] == src_inst for a, b in nb], axis=0) & np.all([dj[a, b] > 0 for a, b in nb], axis=0)
-        fx, fy = x - x0, y - y0
-        inv = [1.0 / np.maximum(dj[a, b], 1e-12) for a, b in nb]  # 1/z is bilinear in pixels on a plane
-        inv_i = (inv[0] * (1 - fx) * (1 - fy) + inv[1] * fx * (1 - fy) + inv[2] * (1 - fx) * fy + inv[3] * fx * fy)
-        rel = np.abs(z[same] * inv_i[same] - 1.0)
-        assert same.sum() > 1000
-        meds.append(float(np.median(rel)))
+    meds = [_reprojection_median(s, i, j) for i, j in [(1, 2), (5, 7), (10, 13), (3, 20), (22, 23)]]
     print(f"reprojection median relative depth error per pair: {[f'{m:.2e}' for m in meds]}")
     assert max(meds) < 1e-3
+    # control: the same check with view j's camera moved 5 cm along its axis fails
+    cj = s.cameras[2]
+    w2c = cj.world_to_camera.copy()
+    w2c[2, 3] += 0.05
+    moved = _reprojection_median(s, 1, 2, Camera(cj.K, w2c, cj.width, cj.height))
+    print(f"control (view 2 moved 5 cm): {moved:.2e}")
+    assert moved > 1e-2
 
 
 @pytest.mark.parametrize("layout", ["colmap", "llff", "3dovs", "lerf", "both"])

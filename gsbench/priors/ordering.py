@@ -10,8 +10,8 @@ unordered training cameras into a chain:
 - ``random``: a seeded permutation.
 - ``filename``: natural sort of the camera names (``frame_2`` before ``frame_10``), ties by index.
 
-`adjacent_distance` is the ordering study's first metric (mean adjacent camera-centre distance);
-the second, the adjacent mask IoU of the propagated masks, lives in `gsbench.priors.propagation`.
+The ordering study's metrics (mean adjacent camera-centre distance, adjacent mask IoU) are
+implemented in `gsbench.metrics.ordering`; `adjacent_distance` here is a convenience for cameras.
 """
 from __future__ import annotations
 

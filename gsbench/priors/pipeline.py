@@ -1,5 +1,9 @@
 """prepare_priors: the one entry point methods call to get order, depth, masks and features.
 
+The ordering statistics (`stats`) use the metric implementations of `gsbench.metrics.ordering`
+(their ids are recorded by the evaluation); `ordering_adjacent_mask_iou_all_ids` is a stricter
+diagnostic from `gsbench.priors.propagation` that also scores ids seen in only one frame as 0.
+
 Each part is computed by its provider (ids recorded in `Priors.providers`), cached on disk by a
 content hash (`gsbench.priors.cache`), and reused on the next call with the same inputs. Depth
 noise (the depth-noise study) is applied after the cache, to the depth prior only.
@@ -15,13 +19,14 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from gsbench.errors import InputError
+from gsbench.metrics import ordering as MO
 from gsbench.priors import depth as D
 from gsbench.priors import masks as M
 from gsbench.priors import propagation as P
 from gsbench.priors import warp as W
 from gsbench.priors.cache import PriorCache, cache_key, scene_content_hash
 from gsbench.priors.features import FeatureProvider, get_feature_provider
-from gsbench.priors.ordering import ORDERINGS, adjacent_distance, order_views
+from gsbench.priors.ordering import ORDERINGS, camera_centers, order_views
 
 MASK_PROVIDERS = ("simulated", "gt", "sam2")
 PROPAGATORS = ("flow", "reproject")
@@ -164,7 +169,8 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
         raise InputError(f"priors.ordering: unknown ordering {mode!r} (expected one of {', '.join(ORDERINGS)})")
     order = order_views(scene.cameras, views, mode, seed)
     providers["ordering"] = mode
-    stats["ordering_adjacent_distance"] = adjacent_distance(scene.cameras, order)
+    stats["ordering_adjacent_distance"] = MO.mean_adjacent_distance(camera_centers(scene.cameras, order),
+                                                                    list(range(len(order))))
     bar.update(1)
 
     content = None
@@ -241,14 +247,20 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
         # adjacent mask IoU of the propagated masks (the ordering study's second metric)
         if per_frame_masks:
             stats["ordering_adjacent_mask_iou"] = None
+            stats["ordering_adjacent_mask_iou_all_ids"] = None
             skipped["ordering_adjacent_mask_iou"] = "per-frame masks are not propagated"
         elif not scene.has_depth:
             stats["ordering_adjacent_mask_iou"] = None
+            stats["ordering_adjacent_mask_iou_all_ids"] = None
             skipped["ordering_adjacent_mask_iou"] = "the scene has no GT depth to warp masks between views"
         else:
             gd, gv = _gt_depths(scene, views, size)
             cams = {v: W.camera_at(scene.cameras[v], size) for v in views}
-            stats["ordering_adjacent_mask_iou"] = P.adjacent_mask_iou(masks, order, cams, gd, gv)
+            # the official metric (gsbench.metrics.ordering: ids present in both frames) ...
+            stats["ordering_adjacent_mask_iou"] = MO.adjacent_mask_iou(
+                [masks[v] for v in order], [np.where(gv[v], gd[v], 0.0) for v in order], [cams[v] for v in order])
+            # ... and a stricter diagnostic where an id seen in only one frame of a pair scores 0
+            stats["ordering_adjacent_mask_iou_all_ids"] = P.adjacent_mask_iou_all_ids(masks, order, cams, gd, gv)
         bar.update(1)
     else:
         skipped["masks"] = "not needed by the method"

@@ -154,9 +154,9 @@ def propagate(order: Sequence[int], segments: Mapping[int, np.ndarray], warper: 
     return tracks
 
 
-def adjacent_mask_iou(tracks: Mapping[int, np.ndarray], order: Sequence[int], cameras: Mapping[int, Camera],
+def adjacent_mask_iou_all_ids(tracks: Mapping[int, np.ndarray], order: Sequence[int], cameras: Mapping[int, Camera],
                       depths: Mapping[int, np.ndarray], valids: Mapping[int, np.ndarray]) -> float | None:
-    """Mean adjacent mask IoU of propagated masks along `order` (GAUSSIANDS.md, part 1).
+    """Mean adjacent mask IoU over all ids (a stricter diagnostic than gsbench.metrics.ordering's).
 
     For each consecutive pair (a, b) the track map of a is z-buffer reprojected into b with a's
     metric depth (and b into a), and for every track id seen in the shared region (pixels that

@@ -77,8 +77,9 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
     channels = torch.cat(parts, dim=1)
     out, t_final = _rasterizer(name)(proj, channels, camera.width, camera.height)
     if torch.is_grad_enabled() and channels.requires_grad and not out.requires_grad:
-        # nothing visible: keep the outputs attached to the graph (zero gradients, not an error)
-        zero = channels[:0].sum()     # an exact 0 even if some channel is inf
+        # nothing visible: keep the outputs attached to the graph (zero gradients, not an error);
+        # empty slices sum to an exact 0 even if some value is inf
+        zero = sum(t[:0].sum() for t in (proj.means2d, proj.conics, proj.opacities, channels))
         out, t_final = out + zero, t_final + zero
     rgb = out[..., :3]
     if background is not None:

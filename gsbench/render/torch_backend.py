@@ -136,6 +136,6 @@ def rasterize_torch(proj: Projected, channels: torch.Tensor, width: int, height:
         t_final = t_final.index_put((pix,), torch.cat(t_chunks))
     if use_ckpt and not out.requires_grad:
         # nothing reached a pixel: keep the outputs attached to the graph (exact zero gradients)
-        out = out + channels[:0].sum()
-        t_final = t_final + proj.opacities[:0].sum()
+        zero = sum(t[:0].sum() for t in (means2d, proj.conics, proj.opacities, channels))
+        out, t_final = out + zero, t_final + zero
     return out.reshape(height, width, C), t_final.reshape(height, width)
