@@ -101,6 +101,7 @@ SKIP_FAMILIES = {
 
 
 QUERY_MODES = ("encode", "decode")
+GROUP_SKIP_KEYS = ("removal",)  # a skipped key that stands for all metrics named <key>_*
 
 
 def _skip_key_matches(key: str, metric: str) -> bool:
@@ -145,7 +146,7 @@ def missing_reason(metric: str, skipped: dict, status: str) -> str:
     return "; ".join(seen)
 
 
-ENV_KEYS = ("git_sha", "gsbench", "platform", "python", "torch", "numpy")
+ENV_KEYS = ("git_sha", "gsbench", "platform")
 
 
 def _read_env(path: Path) -> dict:
@@ -227,8 +228,11 @@ def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
                 entries.append((m, v, section))
                 present.add(m)
     # A metric the evaluation skipped without writing a null still gets a row with its reason.
-    for m in skipped:
-        if m in known_metrics and m not in present:
+    # (also every metric of a group skipped as a whole, e.g. "removal" -> removal_residual, ...)
+    for m in sorted(known_metrics):
+        if m in present:
+            continue
+        if m in skipped or any(m.startswith(f"{k}_") for k in skipped if k in GROUP_SKIP_KEYS):
             entries.append((m, None, "metrics"))
             present.add(m)
 

@@ -621,7 +621,7 @@ def _train_and_evaluate(spec: dict, run_dir: Path, status: dict) -> None:
     train_run(copy.deepcopy(spec["config"]), spec["scene_path"], run_dir, progress=False)
     status["phase"] = "eval"
     write_json_atomic(run_dir / CELL_STATUS_FILE, status)
-    evaluate_run(run_dir)
+    evaluate_run(run_dir, progress=False)
 
 
 # ----------------------------------------------------------------------------- running a grid

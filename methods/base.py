@@ -220,4 +220,5 @@ def scene_init(scene, config: dict, feature_dim: int):
     half = float(scene.extent or 1.0) * float(icfg.get("random_scale", 1.0))
     pc = getattr(scene, "point_colors", None)
     return init_field(scene.points, pc, mode, int(icfg["num_random"]), centre, half,
-                      int(config["train"]["sh_degree"]), feature_dim, int(config["seed"]))
+                      int(config["train"]["sh_degree"]), feature_dim, int(config["seed"]),
+                      icfg.get("max_points"))

@@ -59,8 +59,10 @@ class TrainViews:
 
 # ---------------------------------------------------------------------------- initialisation
 def init_field(points: Optional[np.ndarray], colors: Optional[np.ndarray], mode: str, num_random: int,
-               centre: np.ndarray, half_size: float, sh_degree: int, feature_dim: int, seed: int) -> tuple[GaussianField, str]:
-    """Initial Gaussians from sparse points (colours if given) or uniform in a cube; returns (field, how)."""
+               centre: np.ndarray, half_size: float, sh_degree: int, feature_dim: int, seed: int,
+               max_points: Optional[int] = None) -> tuple[GaussianField, str]:
+    """Initial Gaussians from sparse points (colours if given; a seeded subset of at most `max_points`)
+    or uniform in a cube; returns (field, how)."""
     rng = np.random.default_rng(seed)
     if mode == "points":
         if points is None or len(points) == 0:
@@ -68,6 +70,10 @@ def init_field(points: Optional[np.ndarray], colors: Optional[np.ndarray], mode:
         xyz = np.asarray(points, dtype=np.float64)
         rgb = np.asarray(colors, dtype=np.float64) if colors is not None and len(colors) == len(xyz) else np.full((len(xyz), 3), 0.5)
         how = f"points ({len(xyz)})"
+        if max_points and len(xyz) > int(max_points):
+            keep = np.sort(rng.choice(len(xyz), int(max_points), replace=False))
+            xyz, rgb = xyz[keep], rgb[keep]
+            how = f"points ({len(xyz)} of {len(points)}, seeded subset: train.init.max_points)"
     elif mode == "random":
         n = max(1, int(num_random))
         xyz = centre[None, :] + (rng.random((n, 3)) * 2.0 - 1.0) * half_size

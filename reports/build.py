@@ -125,8 +125,10 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         if p:
             summary.plots.append(p)
             sec.figures.append((p.relative_to(out_dir).as_posix(),
-                                "Error against run time: PSNR / mIoU of the periodic evaluations (train_log.jsonl) "
-                                "over wall time; dots are final results vs total training time; dashed red = Pareto front."))
+                                "Error against run time: lines = PSNR / mIoU of the periodic evaluations in train_log.jsonl over "
+                                "the optimiser's wall clock; dots = final results vs total training time (train_s, which "
+                                "also counts priors and set-up, so dots can sit right of the lines' ends); dashed = Pareto "
+                                "front of final value vs total time (one per scene)."))
         else:
             sec.notes.append("No time curve: the runs have neither periodic evaluations nor final values with a training time.")
 

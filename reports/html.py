@@ -43,19 +43,20 @@ def _counts_table(df: pd.DataFrame, cols: list[str], caption: str) -> str:
     counts.columns = list(cols) + ["runs"]
     head = "".join(f"<th>{e(c)}</th>" for c in counts.columns)
     body = "".join("<tr>" + "".join(f"<td>{e(str(v))}</td>" for v in row) + "</tr>" for row in counts.itertuples(index=False))
-    return f'<table class="prov"><caption>{e(caption)}</caption><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
+    return (f'<div class="tablewrap"><table class="prov"><caption>{e(caption)}</caption><thead><tr>{head}</tr></thead>'
+            f'<tbody>{body}</tbody></table></div>')
 
 
 def _impl_table(df: pd.DataFrame) -> str:
-    rows = df[df["metric"].notna()]
+    rows = df[df["metric"].notna() & df["value"].notna()]  # only ids that produced a number
     rows = rows[rows["source"].astype(object).where(rows["source"].notna(), "") == "metrics"] if "source" in rows else rows
     impl: dict[str, set[str]] = {}
     for m, i in zip(rows["metric"], rows["metric_impl"]):
         impl.setdefault(str(m), set()).add("—" if is_null(i) else str(i))
     body = "".join(f"<tr><td>{e(m)}</td><td>{e(', '.join(sorted(v)))}</td></tr>" for m, v in sorted(impl.items()))
-    return ('<table class="prov"><caption>Metric implementations (metric_impl ids recorded in results.json; '
+    return ('<div class="tablewrap"><table class="prov"><caption>Metric implementations (metric_impl ids recorded in results.json; '
             "a metric with several ids was computed by different implementations)</caption>"
-            f"<thead><tr><th>metric</th><th>metric_impl</th></tr></thead><tbody>{body}</tbody></table>")
+            f"<thead><tr><th>metric</th><th>metric_impl</th></tr></thead><tbody>{body}</tbody></table></div>")
 
 
 def provenance_html(res: Results, writer_version: str) -> str:
@@ -67,7 +68,8 @@ def provenance_html(res: Results, writer_version: str) -> str:
         "numbers from different evaluation protocols are not comparable and are never averaged together.</p>",
         _counts_table(df, prov, "Prior providers (depth, masks, features) per run"),
         _counts_table(df, ["backend"], "Render backends"),
-        _counts_table(df, ["protocol"], "Evaluation protocols"),
+        _counts_table(df, ["protocol", "protocols"],
+                      "Evaluation protocols (primary protocol of the run, and every protocol it was evaluated under)"),
         _impl_table(df),
         _counts_table(df, mach, "Machines and versions that produced the results (results.json `machine`; env.* from the run's env.json)") if mach
         else "<p>Machine: not recorded in results.json.</p>",
@@ -106,7 +108,7 @@ def write_index(path: Path, title: str, source: str, generated: str, sections: l
         body.append(f'<section id="{e(s.id)}"><h2>{e(s.title)}</h2>')
         for t in s.tables:
             body.append(f"<h3>{e(t.title)}</h3>")
-            body.append(t.to_html())
+            body.append(f'<div class="tablewrap">{t.to_html()}</div>')
         for src, cap in s.figures:
             body.append(f'<figure><img src="{e(src)}" alt="{e(cap)}"><figcaption>{e(cap)}</figcaption></figure>')
         for n in s.notes:

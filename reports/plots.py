@@ -181,7 +181,7 @@ def plot_time_curves(res: Results, study: Any, run_ids: list[str], path: Path) -
             ax.legend(fontsize=7, loc="best")
     name = "standalone / reconstruction runs" if study is None else f"study '{study}'"
     fig.suptitle(f"Error against run time — {name} ({len(run_ids)} runs; lines: periodic eval, "
-                 f"dots: final results)", fontsize=11)
+                 f"dots: final results vs total train time)", fontsize=11)
     return _save(fig, path), notes
 
 

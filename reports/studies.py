@@ -157,9 +157,12 @@ def semantic_table(res: Results, protocol: str, base_metrics: list[str], table_i
     rows, mixed = [], []
     for meth in ordered_methods(res.distinct("method", ids)):
         mids = [r for r in ids if res.runs.at[r, "method"] == meth]
+        has_modes = all(any(res.has_metric(mids, m + sfx) for m in base_metrics) for sfx in ("_encode", "_decode"))
         for suffix, label in (("", ""), ("_encode", " (encode)"), ("_decode", " (decode)")):
             names = [m + suffix for m in base_metrics]
             if not any(res.has_metric(mids, n) for n in names):
+                continue
+            if suffix == "" and has_modes:  # the configured mode repeats one of the two mode rows
                 continue
             per_scene: dict[str, list[Cell]] = {n: [] for n in names}
             cells: list[Cell] = []
@@ -174,6 +177,9 @@ def semantic_table(res: Results, protocol: str, base_metrics: list[str], table_i
             rows.append(Row([method_label(meth) + label], cells))
     if not rows:
         return []
+    if any(r.labels[0].endswith(("(encode)", "(decode)")) for r in rows):
+        caption += (" (encode) = the paper's query mode (text -> CLIP -> AE encoder, cosine with the rendered "
+                    "latent); (decode) = LangSplat's (latent decoded to CLIP space).")
     t = Table(table_id, title, caption + " Overall = mean over scenes.", ["Method"], columns, rows)
     t.bold_best_per_column()
     return [_finish(t, mixed)]

@@ -160,3 +160,11 @@ def test_cli_collect(runs: Path, capsys):
     assert main(["collect", str(empty)]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no results.json found" in err
+
+
+def test_descriptive_timings_are_not_rows(tmp_path: Path):
+    write_run(tmp_path, "a", method="vanilla", scene="s", metrics={"psnr": 20.0, "fps": 2.0},
+              timings={"train_s": 5.0, "fps": 2.0, "fps_sync": "none (cpu, synchronous)"})
+    df = collect(tmp_path)
+    assert sorted(df["metric"]) == ["fps", "peak_rss_mb", "psnr", "train_s"]
+    assert df[df["metric"] == "fps"].iloc[0]["source"] == "metrics"

@@ -212,6 +212,19 @@ def test_ablate_submitit_local(tmp_path):
         res = read_json(d / "results.json")
         assert res["study"] == "tiny-test" and set(res["grid"]) == {"gaussiands.latent_dim", "gaussiands.losses.ds"}
         assert res["config"]["train"]["iterations"] == 30
+        m = res["metrics"]
+        # a synthetic scene supports both protocols; both query modes are evaluated and named
+        assert res["protocols"] == ["3dovs", "lerf"]
+        for name in ("miou_3dovs_encode", "miou_3dovs_decode", "mbiou_3dovs_encode", "mbiou_3dovs_decode",
+                     "miou_lerf_encode", "miou_lerf_decode", "removal_residual", "removal_psnr_outside",
+                     "ordering_adjacent_distance", "ordering_adjacent_mask_iou"):
+            assert m[name] is not None, name
+            assert name in res["metric_impl"], name
+        for name in ("miou_3dovs", "mbiou_3dovs", "miou_lerf"):
+            assert m[name] == m[f"{name}_{res['query_mode']}"]
+            assert 0.0 <= m[name] <= 1.0
+        assert 0.0 <= m["removal_residual"] <= 1.0
+        assert res["providers"]["depth"] and res["providers"]["masks"] and res["providers"]["features"]
         pids.add(read_json(d / grids.CELL_STATUS_FILE)["pid"])
     assert os.getpid() not in pids and (out / ".submitit").is_dir()
 

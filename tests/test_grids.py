@@ -156,3 +156,15 @@ def test_format_status_counts():
     text = grids.format_status(rows)
     assert "2 cells: done 1, failed 1" in text
     assert "ValueError: bad" in text
+
+
+def test_cli_list_dry_run_and_errors(capsys):
+    from gsbench.cli import main
+    assert main(["ablate", "--list"]) == 0
+    out = capsys.readouterr().out
+    for study in STUDIES:
+        assert f"{study}-cpu" in out and f"{study}-paper" in out
+    assert main(["ablate", "--grid", "loss_subsets-cpu", "--out", "x", "--dry-run"]) == 0
+    assert "8 cells" in capsys.readouterr().out
+    assert main(["ablate", "--grid", "tiny-test", "--out", "x", "--set", "gaussiands.latent_dims=3"]) == 1
+    assert "did you mean gaussiands.latent_dim" in capsys.readouterr().err

@@ -40,7 +40,7 @@ def test_priors_contract(scene):
     assert sorted(p.order) == views
     assert set(p.depth) == set(views) and all(isinstance(d, DepthPrior) for d in p.depth.values())
     assert set(p.masks) == set(views)
-    for v, m in p.masks.items():
+    for m in p.masks.values():
         assert m.dtype == np.int32 and m.shape == (48, 64) and m.min() >= -1
     for (v, t), f in p.mask_features.items():
         assert v in views and np.any(p.masks[v] == t)

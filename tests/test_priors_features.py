@@ -41,7 +41,7 @@ def test_mask_features_follow_majority_class_with_noise():
     assert p.providers["features"] == "text-aligned-sim-v1"
     fp = p.feature_provider
     text = fp.encode_text(CLASS_NAMES)
-    for (v, t), f in p.mask_features.items():
+    for (_v, t), f in p.mask_features.items():
         assert f.shape == (512,) and abs(np.linalg.norm(f) - 1) < 1e-5
         cls = scene.instance_classes[t]                     # gt masks: track id = instance id
         sims = text @ f

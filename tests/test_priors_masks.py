@@ -194,3 +194,11 @@ def test_labels_from_masks_small_on_top():
     small[1, 1] = True
     lab = M._labels_from_masks([small, big], (4, 4))
     assert lab[1, 1] != lab[0, 0] and lab[0, 0] >= 0 and lab[0, 3] == -1
+
+
+def test_flow_propagation_on_tiny_frames():
+    # OpenCV's DIS refuses frames under 12 px: the warper pads them
+    scene = make_sphere_scene(3, 16, 12)
+    p = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0, "propagator": "flow"}},
+                       list(range(6)), (8, 6), None, False, True, False, progress=False)
+    assert all(m.shape == (6, 8) for m in p.masks.values())

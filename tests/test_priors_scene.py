@@ -43,7 +43,7 @@ def ring_cameras(n_per_ring=8, width=96, height=72, arc_deg=300.0, radius=3.0, h
     fx = 0.9 * width
     K = np.array([[fx, 0, width / 2], [0, fx, height / 2], [0, 0, 1.0]])
     k = 0
-    for ring, h in enumerate(heights):
+    for h in heights:
         for a in np.linspace(0.0, np.radians(arc_deg), n_per_ring):
             c = (radius * np.cos(a), radius * np.sin(a), h)
             cams.append(Camera(K, look_at(c), width, height, name=f"frame_{k:03d}.png"))

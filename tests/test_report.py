@@ -74,7 +74,8 @@ def test_semantic_tables(report: Path):
     v = row_of(rows, "3DGS (vanilla)")
     assert v[1] == "n/a (method has no semantic field)" and v[3] == "–"
     lerf = md_rows(report, "lerf_miou")
-    assert row_of(lerf, "GaussianDS")[1:] == ["**61.40**", "**61.40**"]
+    assert "GaussianDS" not in [r[0] for r in lerf]  # configured mode = the encode row, not repeated
+    assert row_of(lerf, "GaussianDS (encode)")[1:] == ["**61.40**", "**61.40**"]
     assert row_of(lerf, "GaussianDS (decode)")[1:] == ["55.00", "55.00"]
     assert row_of(lerf, "Two-stage")[1:] == ["50.00", "50.00"]
 
@@ -288,3 +289,13 @@ def test_lambda_slice_keeps_one_sweep(tmp_path: Path):
     sl = _lambda_slice(res, ids, AX_LAMBDAS, AX_LAMBDAS[::2])  # keep depth and sem
     assert len(ids) == 10 and len(sl) == 6
     assert all(res.runs.at[r, "axis.gaussiands.lambdas.tv"] == 1.5 for r in sl)
+
+
+def test_long_reason_is_shortened_in_cells(tmp_path: Path):
+    long = "no LPIPS weights: backbone vgg16.pth not found (set GSBENCH_WEIGHTS)"
+    write_run(tmp_path, "a", method="vanilla", scene="s", metrics={"psnr": 20.0, "lpips": None}, skipped={"lpips": long})
+    res = Results(collect(tmp_path))
+    (t,) = reconstruction_table(res)
+    lp = next(j for j, c in enumerate(t.columns) if c.metric == "lpips")
+    assert t.rows[0].cells[lp].plain() == "n/a (no LPIPS weights)"
+    assert res.long_reasons == {"no LPIPS weights": {long}}

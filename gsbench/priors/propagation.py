@@ -31,6 +31,7 @@ from gsbench.scene import Camera
 DEFAULT_MIN_IOU = 0.3
 FB_ALPHA = 0.01
 FB_BETA = 0.5
+MIN_FLOW_SIDE = 16
 
 # warp(prev_view, cur_view, prev_labels) -> (labels in cur frame (-1 none), known bool map)
 Warper = Callable[[int, int, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -55,7 +56,15 @@ class FlowWarper:
     def flows(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
         """(F: a -> b, B: b -> a) as H x W x 2 float32 pixel displacements."""
         ga, gb = self.gray[a], self.gray[b]
-        return self.dis.calc(ga, gb, None), self.dis.calc(gb, ga, None)
+        H, Wd = ga.shape
+        # OpenCV's DIS needs a side of at least 12 px: tiny frames are padded (reflected) and cropped
+        ph, pw = max(0, MIN_FLOW_SIDE - H), max(0, MIN_FLOW_SIDE - Wd)
+        if ph or pw:
+            ga = cv2.copyMakeBorder(ga, 0, ph, 0, pw, cv2.BORDER_REFLECT)
+            gb = cv2.copyMakeBorder(gb, 0, ph, 0, pw, cv2.BORDER_REFLECT)
+        F = self.dis.calc(ga, gb, None)[:H, :Wd]
+        B = self.dis.calc(gb, ga, None)[:H, :Wd]
+        return np.ascontiguousarray(F), np.ascontiguousarray(B)
 
     def __call__(self, prev: int, cur: int, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         F, B = self.flows(prev, cur)

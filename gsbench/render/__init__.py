@@ -83,7 +83,10 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
         out, t_final = out + zero, t_final + zero
     rgb = out[..., :3]
     if background is not None:
-        bg = torch.as_tensor(background, device=device, dtype=dtype).reshape(1, 1, 3)
+        bg = torch.as_tensor(background, device=device, dtype=dtype)
+        if bg.numel() != 3:
+            raise ValueError(f"render background must be 3 values (RGB), got shape {tuple(bg.shape)}")
+        bg = bg.reshape(1, 1, 3)
         rgb = rgb + t_final[..., None] * bg
     feats = out[..., 4:] if field.features is not None else None
     return RenderOutput(rgb=rgb, depth=out[..., 3], features=feats, alpha=1.0 - t_final, backend=name,

@@ -23,11 +23,16 @@ reduction order is fixed, so the same inputs give bit-identical outputs and grad
 number of threads.
 
 Threads: numba uses min(torch.get_num_threads(), NUMBA_NUM_THREADS) threads, so
-torch.set_num_threads() governs both backends.
+torch.set_num_threads() governs both backends. Threading layer: numba's `workqueue`, unless
+NUMBA_THREADING_LAYER says otherwise. numba's `omp` layer loads the system libgomp next to
+PyTorch's own copy; the two OpenMP runtimes' spinning workers then slow every later PyTorch op
+by 10-30x on a 2-core machine (measured), so it is not used by default. `workqueue` does not
+allow two Python threads to render with the `cpu` backend at the same time.
 """
 from __future__ import annotations
 
 import math
+import os
 
 import numba
 import numpy as np
@@ -36,6 +41,11 @@ import torch
 from gsbench.render import cpu_kernels as K
 from gsbench.render import rules
 from gsbench.render.projection import Projected
+
+# Must precede the first parallel kernel launch. Set in the environment too: numba re-reads its
+# configuration from the environment whenever os.environ changes, which would undo a plain assignment.
+os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
+numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
 
 ROW_BUDGET_BYTES = 64 * 2**20   # gradient rows of one backward wave (float64)
 SKIP_MARGIN = 1e-3              # see cpu_kernels: exponent bound below which alpha < ALPHA_MIN surely

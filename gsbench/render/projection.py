@@ -34,8 +34,15 @@ def camera_tensors(camera: Camera, device, dtype) -> tuple[torch.Tensor, torch.T
 
 
 def _cov2d(means_c: torch.Tensor, rot: torch.Tensor, scales: torch.Tensor, R_wc: torch.Tensor,
-           K: torch.Tensor, width: int, height: int) -> torch.Tensor:
-    """2D covariance (xx, xy, yy) with the low-pass added, for camera-space means."""
+           K: torch.Tensor, width: int, height: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """2D covariance (xx, xy, yy) with the low-pass added, and its determinant.
+
+    The covariance is A A^T + EPS2D I with A = J R_wc R S (2x3). Its determinant is computed as
+    det(A A^T) + EPS2D tr(A A^T) + EPS2D^2 with det(A A^T) = sum of the squared 2x2 minors of A
+    (Cauchy-Binet): a sum of non-negative terms in which each minor is s_i s_j times a minor of the
+    well-conditioned J R_wc R. So it never cancels, even in float32 for aspect ratios of 1e4 where
+    xx * yy - xy^2 loses every digit.
+    """
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     x, y, z = means_c.unbind(-1)
     tan_fovx = 0.5 * width / fx
@@ -52,11 +59,15 @@ def _cov2d(means_c: torch.Tensor, rot: torch.Tensor, scales: torch.Tensor, R_wc:
         fx * inv_z, zero, -fx * tx * inv_z * inv_z,
         zero, fy * inv_z, -fy * ty * inv_z * inv_z,
     ], dim=-1).reshape(-1, 2, 3)
-    M = rot * scales[:, None, :]                      # R S
-    cov3d_w = M @ M.transpose(1, 2)                    # R S S^T R^T (world)
-    cov3d_c = R_wc @ cov3d_w @ R_wc.T                  # camera space
-    cov = J @ cov3d_c @ J.transpose(1, 2)
-    return torch.stack([cov[:, 0, 0] + rules.EPS2D, cov[:, 0, 1], cov[:, 1, 1] + rules.EPS2D], dim=-1)
+    A = (J @ R_wc @ rot) * scales[:, None, :]          # J R_wc R S
+    a0, a1 = A[:, 0], A[:, 1]
+    xx, xy, yy = (a0 * a0).sum(-1), (a0 * a1).sum(-1), (a1 * a1).sum(-1)
+    m01 = a0[:, 0] * a1[:, 1] - a0[:, 1] * a1[:, 0]
+    m02 = a0[:, 0] * a1[:, 2] - a0[:, 2] * a1[:, 0]
+    m12 = a0[:, 1] * a1[:, 2] - a0[:, 2] * a1[:, 1]
+    det = (m01 * m01 + m02 * m02 + m12 * m12) + rules.EPS2D * (xx + yy) + rules.EPS2D * rules.EPS2D
+    cov = torch.stack([xx + rules.EPS2D, xy, yy + rules.EPS2D], dim=-1)
+    return cov, det
 
 
 def project_gaussians(field: GaussianField, camera: Camera) -> Projected:
@@ -75,8 +86,7 @@ def project_gaussians(field: GaussianField, camera: Camera) -> Projected:
         zs = torch.where(ok, z, torch.ones_like(z))
         mc = torch.where(ok[:, None], means_c, torch.ones_like(means_c))
         rot = quat_to_rotmat(normalize_quats(field.quats))
-        cov = _cov2d(mc, rot, field.scales, R_wc, K, W, H)
-        det = cov[:, 0] * cov[:, 2] - cov[:, 1] * cov[:, 1]
+        cov, det = _cov2d(mc, rot, field.scales, R_wc, K, W, H)
         ok &= torch.isfinite(cov).all(-1) & torch.isfinite(det) & (det > 0)
         opac = field.opacity
         ok &= opac >= rules.ALPHA_MIN
@@ -105,8 +115,7 @@ def project_gaussians(field: GaussianField, camera: Camera) -> Projected:
         means2d.retain_grad()
     scales = torch.exp(field.log_scales[ids].clamp(LOG_SCALE_MIN, LOG_SCALE_MAX))
     rot = quat_to_rotmat(normalize_quats(field.quats[ids]))
-    cov = _cov2d(means_c, rot, scales, R_wc, K, W, H)
-    det = cov[:, 0] * cov[:, 2] - cov[:, 1] * cov[:, 1]
+    cov, det = _cov2d(means_c, rot, scales, R_wc, K, W, H)
     conics = torch.stack([cov[:, 2], -cov[:, 1], cov[:, 0]], -1) / det[:, None]
     return Projected(ids=ids, means2d=means2d, conics=conics, depths=z,
                      opacities=torch.sigmoid(field.opacity_logits[ids]), radii=radii, cov2d=cov)
