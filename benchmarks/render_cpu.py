@@ -136,7 +136,7 @@ def bench_scene(width: int, height: int, n: int, n_features: int, seed: int, rep
     diffs = [(o_c.rgb - o_t.rgb).abs().max(), (o_c.depth - o_t.depth).abs().max(), (o_c.alpha - o_t.alpha).abs().max()]
     if o_t.features is not None:
         diffs.append((o_c.features - o_t.features).abs().max())
-    row["max_abs_diff"] = float(max(diffs))
+    row["max_abs_diff"] = float(max(d.detach() for d in diffs))
     row["grad_rel_diff"] = float(max(((grads["cpu"][k] - g).abs().max() / g.abs().max().clamp(min=1e-30)).item()
                                      for k, g in grads["torch"].items()))
     row["n_visible"] = o_t.info.get("n_visible")

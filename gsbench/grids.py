@@ -748,10 +748,7 @@ def status_rows(runs_dir: Path, grid: Optional[Grid] = None) -> list[dict]:
     runs_dir = Path(runs_dir)
     rows = []
     if grid is not None:
-        for pc in plan(grid, runs_dir, create_scenes=False):
-            rows.append(_row(pc.run_id, pc.run_dir, pc.cell.method, pc.cell.scene.label, pc.cell.seed,
-                             pc.config.get("grid", {})))
-        return rows
+        return planned_rows(plan(grid, runs_dir, create_scenes=False))
     for cj in sorted(runs_dir.glob(f"*/{CELL_FILE}")):
         try:
             spec = read_json(cj)
@@ -762,6 +759,12 @@ def status_rows(runs_dir: Path, grid: Optional[Grid] = None) -> list[dict]:
         rows.append(_row(cj.parent.name, cj.parent, spec.get("method", ""), label, spec.get("seed"),
                          spec.get("axes", {})))
     return rows
+
+
+def planned_rows(planned: list[PlannedCell]) -> list[dict]:
+    """Status rows of planned cells (cells never started are pending)."""
+    return [_row(pc.run_id, pc.run_dir, pc.cell.method, pc.cell.scene.label, pc.cell.seed, pc.config.get("grid", {}))
+            for pc in planned]
 
 
 def _row(run_id, run_dir, method, scene, seed, axes) -> dict:

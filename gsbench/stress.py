@@ -220,7 +220,10 @@ def render_cases(backends: Iterable[str]) -> list[Case]:
         add("zero quaternions", zero_quats)
         add("1x1 image", lambda: _field(30), cam_fn=lambda: _camera(1, 1))
         add("single Gaussian", lambda: _field(1, spread=0.0, log_scale=-1.0))
-        add("100k Gaussians", lambda: _field(100_000, log_scale=-4.5), cam_fn=lambda: _camera(48, 48),
+        # 100k Gaussians covering the whole image (a cluster in the middle would leave the border
+        # pixels unsaturated and make the reference walk all 100k per tile: minutes instead of seconds)
+        add("100k Gaussians", lambda: _field(100_000, spread=2.0, log_scale=-3.5, opacity_logit=3.0),
+            cam_fn=lambda: _camera(48, 48),
             out_tol=5e-4, check_grad=False)
     return cases
 
@@ -274,7 +277,9 @@ def scaled_err(a, b, floor: float = 1e-30) -> float:
     a, b = _to_np(a), _to_np(b)
     if a.size == 0:
         return 0.0
-    return float(np.max(np.abs(a - b))) / max(float(np.max(np.abs(b))), floor)
+    with np.errstate(invalid="ignore", over="ignore"):
+        err = float(np.max(np.abs(a - b))) / max(float(np.max(np.abs(b))), floor)
+    return err if math.isfinite(err) else math.inf   # NaN never compares as "small"
 
 
 def _result(component: str, outs32: list, outs64: list, grads32: Optional[list], grads64: Optional[list],
@@ -865,8 +870,9 @@ def metric_cases() -> list[Case]:
             res.finite_out = all_finite(r)
             res.max_abs = float(np.max(np.abs(r - expect)))
             res.max_rel = res.max_abs / expect
-            res.passed = bool(res.finite_out and r.shape == (6, 5) and res.max_abs <= 1e-9 and float(r.max() - r.min()) == 0.0)
-            res.note = f"constant map {float(r.mean()):.10f} vs hand-computed {expect:.10f} ({what})"
+            res.passed = bool(res.finite_out and r.shape == (6, 5) and res.max_abs <= 1e-6 and float(r.max() - r.min()) == 0.0)
+            res.note = (f"constant map {float(r.mean()):.10f} vs hand-computed {expect:.10f} ({what}; "
+                        f"cosines in float32 by design, tol 1e-6)")
             return res
         return run
 

@@ -24,6 +24,8 @@ def _mlp(dims: Sequence[int]) -> nn.Sequential:
 
 
 def _unit(x: torch.Tensor) -> torch.Tensor:
+    # divide by the largest magnitude first so the norm cannot overflow (float32 inputs ~1e20+)
+    x = x / x.abs().amax(dim=-1, keepdim=True).clamp_min(1e-30)
     return x / x.norm(dim=-1, keepdim=True).clamp_min(1e-12)
 
 

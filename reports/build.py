@@ -78,6 +78,9 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
     table_dir = out_dir / "tables"
     plot_dir.mkdir(exist_ok=True)
     table_dir.mkdir(exist_ok=True)
+    # a re-run must not leave figures / tables of studies that are gone (only our own file kinds)
+    for stale in [*plot_dir.glob("*.png"), *table_dir.glob("*.md"), *table_dir.glob("*.tex")]:
+        stale.unlink()
     summary = ReportSummary(out_dir=out_dir, index=out_dir / "index.html")
     summary.notes += list(df.attrs.get("warnings", []))
     summary.collected = write_collected(df, out_dir)
@@ -100,7 +103,7 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         from tqdm import tqdm
         it = tqdm(steps, desc="report tables/plots", unit="table")
     for t in it:
-        sec = section(_section_of(t.id))
+        sec = section(t.section or _section_of(t.id))
         sec.tables.append(t)
         if not t.id.startswith(_NO_BARS):
             p = plots.plot_table_bars(t, plot_dir / f"bars_{t.id}.png")
@@ -120,7 +123,7 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         p, notes = plots.plot_time_curves(res, st if key != "main" else None, ids, plot_dir / f"time_{_slug(key)}.png")
         sec = section(key)
         if key.startswith("other_"):
-            sec.title = f"Runs of study '{st}' (no table layout for this study)"
+            sec.title = f"Study '{st}' (no paper layout)"
         sec.notes += notes
         if p:
             summary.plots.append(p)
@@ -159,7 +162,8 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         summary.notes.append("Main runs exist but carry none of the reconstruction / segmentation metrics.")
     unknown = sorted(s for s in studies if s not in MAIN_STUDIES and s not in STUDIES)
     if unknown:
-        summary.notes.append("Studies without a table layout (time curves only): " + ", ".join(map(str, unknown)) + ".")
+        summary.notes.append("Studies without a paper layout (generic table by grid axis): "
+                             + ", ".join(map(str, unknown)) + ".")
     for t in tables:
         summary.notes += [f"{t.title}: {n}" for n in t.notes]
     for short, full in sorted(res.long_reasons.items()):

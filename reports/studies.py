@@ -497,6 +497,23 @@ def _slug(s: str) -> str:
     return "".join(ch if ch.isalnum() else "_" for ch in str(s))
 
 
+def other_study_tables(res: Results) -> list[Table]:
+    """A study without a paper layout (e.g. the `tiny-test` grid): rows = its varying axes,
+    columns = the usual reconstruction and segmentation metrics that its runs carry."""
+    from gsbench.reports.spec import STUDIES
+    tables = []
+    for st in sorted(s for s in res.studies() if s not in MAIN_STUDIES and s not in STUDIES):
+        ids = res.run_ids(study=st)
+        axes = [c for c in res.axis_columns if c != "axis.method" and len(res.distinct(c, ids)) > 1]
+        ts = ablation_table(res, st, f"study_{_slug(st)}", f"Study '{st}'",
+                            f"Runs of study '{st}' by grid axis (no paper layout for this study).",
+                            axes, [a.replace("axis.", "") for a in axes], ["ssim", "psnr", "lpips", "miou", "mbiou"])
+        for t in ts:
+            t.section = f"other_{st}"
+        tables += ts
+    return tables
+
+
 def build_tables(res: Results) -> list[Table]:
     """Every table that has data, in the paper's order."""
     tables: list[Table] = []
@@ -515,4 +532,5 @@ def build_tables(res: Results) -> list[Table]:
     tables += latent_dim_tables(res)
     tables += lambda_table(res)
     tables += noise_table(res)
+    tables += other_study_tables(res)
     return tables

@@ -85,6 +85,7 @@ class Table:
     notes: list[str] = field(default_factory=list)
     label_is_check: bool = False  # the label columns are check marks (loss subsets)
     label_headers_latex: list[str] | None = None  # LaTeX source of the label headers (else escaped)
+    section: str | None = None  # report section (HTML) when not implied by the id
 
     # ---------------------------------------------------------------- bold marks
     def bold_best_per_column(self) -> None:

@@ -165,3 +165,21 @@ def test_cli_scores_mask_folder(tmp_path):
     assert "missing predictions: 3" in out.stdout
     res = json.loads((tmp_path / "o" / "results.json").read_text())
     assert res["metrics"]["miou_lerf"] == pytest.approx(0.25)
+
+
+@needs_shared
+def test_label_masks_for_run_evaluation_match_independent_raster():
+    """evaluate_run's LERF GT: polygons rasterised at the label size, resized NEAREST; boxes scaled."""
+    from gsbench.datasets.ovs import read_lerf_label
+    from gsbench.evaluate import label_masks
+    w, h, gt = _gt_masks_independent(LABEL)
+    _, objs = read_lerf_label(LABEL)
+    masks, boxes = label_masks(objs, w, h, 197, 145)          # 1/5 of 985 x 725
+    assert sorted(masks) == sorted(gt)
+    for q, m in gt.items():
+        ref = cv2.resize(m.astype(np.uint8), (197, 145), interpolation=cv2.INTER_NEAREST).astype(bool)
+        assert masks[q].shape == (145, 197) and np.array_equal(masks[q], ref)
+    raw = {o["category"]: o["bbox"] for o in json.loads(LABEL.read_text())["objects"]}
+    for q, b in boxes.items():
+        assert b.shape == (1, 4)
+        assert np.allclose(b[0], np.asarray(raw[q], float) / 5.0)

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -16,6 +18,15 @@ import yaml
 from gsbench import grids
 from gsbench.executors import SerialExecutor
 from gsbench.store import read_json, write_json_atomic
+
+@pytest.fixture
+def own_tmp():
+    """A temp folder outside pytest's basetemp: concurrent pytest sessions on a shared machine rotate
+    (delete) old basetemps, which must not happen under a long-running grid."""
+    d = Path(tempfile.mkdtemp(prefix="gsbench-grid-test-"))
+    yield d
+    shutil.rmtree(d, ignore_errors=True)
+
 
 TINY_SCENE = {"preset": "tabletop-small", "views": 9, "resolution": [32, 24]}
 
@@ -152,14 +163,14 @@ def test_vanilla_cell_real_results(tmp_path):
 
 
 @pytest.mark.slow
-def test_ablate_kill_and_resume(tmp_path):
+def test_ablate_kill_and_resume(own_tmp):
     """The shipped tiny grid (2 axes x 2 values on tabletop-small; iterations cut to 40 and width to
     32 px to bound CI time) with --jobs 2: SIGKILL the whole process group once some but not all
     cells are done, re-run, and check that finished cells were not re-trained and all end done."""
-    out = tmp_path / "runs"
+    out = own_tmp / "runs"
     sets = ["--set", "train.iterations=40", "train.max_width=32"]
     args = _gsbench("ablate", "--grid", "tiny-test", "--out", str(out), "--jobs", "2", *sets, "--no-progress")
-    log = open(tmp_path / "first.log", "w")
+    log = open(own_tmp / "first.log", "w")
     proc = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     deadline = time.time() + 1500
     done: list[Path] = []
@@ -169,7 +180,7 @@ def test_ablate_kill_and_resume(tmp_path):
             break
         if proc.poll() is not None:
             pytest.fail(f"ablate exited ({proc.returncode}) before any cell finished: "
-                        + (tmp_path / "first.log").read_text()[-2000:])
+                        + (own_tmp / "first.log").read_text()[-2000:])
         time.sleep(0.2)
     assert done, "no cell finished in time"
     os.killpg(proc.pid, signal.SIGKILL)
@@ -196,9 +207,9 @@ def test_ablate_kill_and_resume(tmp_path):
 
 
 @pytest.mark.slow
-def test_ablate_submitit_local(tmp_path):
+def test_ablate_submitit_local(own_tmp):
     """The same tiny grid through the submitit executor in its local mode (job array)."""
-    out = tmp_path / "runs"
+    out = own_tmp / "runs"
     r = subprocess.run(_gsbench("ablate", "--grid", "tiny-test", "--out", str(out), "--executor", "submitit",
                                 "--cluster", "local", "--timeout-min", "60",
                                 "--set", "train.iterations=30", "train.max_width=32", "--no-progress"),
@@ -229,13 +240,13 @@ def test_ablate_submitit_local(tmp_path):
     assert os.getpid() not in pids and (out / ".submitit").is_dir()
 
 
-def test_priors_requests_group_cells_that_share_priors(tmp_path):
+def test_priors_requests_group_cells_that_share_priors(own_tmp):
     grid = grids.load_grid(_write_grid(
-        tmp_path / "g.yaml", base={"method": "gaussiands", "preset": "cpu-small",
+        own_tmp / "g.yaml", base={"method": "gaussiands", "preset": "cpu-small",
                                    "set": {"train.iterations": 5, "train.max_width": 32}},
         axes={"gaussiands.latent_dim": [3, 6], "gaussiands.losses.tv": [True, False]},
         extra_cells=[{"method": "vanilla"}, {"method": "twostage"}, {"priors.ordering": "random"}]))
-    planned = grids.plan(grid, tmp_path / "runs")
+    planned = grids.plan(grid, own_tmp / "runs")
     reqs = {pc.cell.method + str(pc.cell.axes): grids.priors_request(pc.spec()) for pc in planned}
     gaussiands = [json.dumps(r, sort_keys=True) for k, r in reqs.items()
                   if k.startswith("gaussiands") and "random" not in k]

@@ -299,3 +299,33 @@ def test_long_reason_is_shortened_in_cells(tmp_path: Path):
     lp = next(j for j, c in enumerate(t.columns) if c.metric == "lpips")
     assert t.rows[0].cells[lp].plain() == "n/a (no LPIPS weights)"
     assert res.long_reasons == {"no LPIPS weights": {long}}
+
+
+def test_rerun_removes_stale_outputs(tmp_path: Path):
+    from gsbench.reports import build_report
+    root = tmp_path / "runs"
+    write_run(root, "a", method="vanilla", scene="s", metrics={"psnr": 20.0, "ssim": 0.5})
+    out = tmp_path / "rep"
+    (out / "plots").mkdir(parents=True)
+    (out / "plots" / "bars_old_study.png").write_bytes(b"x")
+    (out / "tables").mkdir()
+    (out / "tables" / "old.md").write_text("x")
+    s = build_report(root, out)
+    assert not (out / "plots" / "bars_old_study.png").exists() and not (out / "tables" / "old.md").exists()
+    assert sorted(p.name for p in (out / "plots").glob("*.png")) == sorted(p.name for p in s.plots)
+
+
+def test_unknown_study_gets_generic_table(tmp_path: Path):
+    root = tmp_path / "runs"
+    for d in (3, 6):
+        for ds in (True, False):
+            write_run(root, f"t/{d}{ds}", method="gaussiands", scene="tabletop", study="tiny-test",
+                      grid={"gaussiands.latent_dim": d, "gaussiands.losses.ds": ds},
+                      metrics={"psnr": 20.0 + d + ds, "miou_3dovs": 0.1 * d})
+    tables = build_tables(Results(collect(root)))
+    assert [t.id for t in tables] == ["study_tiny_test"]
+    t = tables[0]
+    assert t.label_headers == ["gaussiands.latent_dim", "gaussiands.losses.ds"] and t.section == "other_tiny-test"
+    got = [(r.labels, [c.plain() for c in r.cells]) for r in t.rows]
+    assert got == [(["3", "False"], ["23.00", "30.00"]), (["3", "True"], ["24.00", "30.00"]),
+                   (["6", "False"], ["26.00", "60.00"]), (["6", "True"], ["27.00", "60.00"])]

@@ -69,9 +69,15 @@ def run(args: argparse.Namespace) -> int:
         slurm = {k: v for k, v in slurm.items() if not k.startswith("slurm_")}
     executor = make_executor(args.executor, jobs=args.jobs, folder=args.out / ".submitit", cluster=args.cluster,
                              progress=not args.no_progress, **slurm)
-    report = grids.run_grid(grid, args.out, executor, retry_failed=args.retry_failed,
-                            share_priors=not args.no_shared_priors)
-    rows = grids.status_rows(args.out, grid)
+    from concurrent.futures.process import BrokenProcessPool
+    try:
+        report = grids.run_grid(grid, args.out, executor, retry_failed=args.retry_failed,
+                                share_priors=not args.no_shared_priors)
+    except BrokenProcessPool as e:
+        print(f"gsbench ablate: a worker process died ({e}); finished cells are saved, re-run to resume "
+              "the others (see --status)", file=sys.stderr)
+        return 1
+    rows = grids.planned_rows(report.planned)      # the cells this run planned (not re-planned)
     print(grids.format_status(rows))
     failed = [r for r in report.results if r and r.get("state") != "done"]
     for r in failed:

@@ -79,8 +79,9 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
     if torch.is_grad_enabled() and channels.requires_grad and not out.requires_grad:
         # nothing visible: keep the outputs attached to the graph (zero gradients, not an error);
         # empty slices sum to an exact 0 even if some value is inf
-        zero = sum(t[:0].sum() for t in (proj.means2d, proj.conics, proj.opacities, channels))
-        out, t_final = out + zero, t_final + zero
+        out, t_final = out + channels[:0].sum(), t_final + proj.opacities[:0].sum()
+    if torch.is_grad_enabled() and proj.means2d.requires_grad and proj.ids.numel() == 0:
+        out = out + proj.means2d[:0].sum()   # so out.means2d.grad is zeros after backward, not None
     rgb = out[..., :3]
     if background is not None:
         bg = torch.as_tensor(background, device=device, dtype=dtype)

@@ -82,7 +82,7 @@ def rasterize_torch(proj: Projected, channels: torch.Tensor, width: int, height:
     Returns (H x W x C) composited channels (no background) and (H x W) final transmittance.
     """
     device, dtype = channels.device, channels.dtype
-    m, C = channels.shape
+    C = channels.shape[1]
     means2d = proj.means2d[proj.ids]
     use_ckpt = torch.is_grad_enabled() and any(
         t.requires_grad for t in (means2d, proj.conics, proj.opacities, channels))
@@ -135,7 +135,8 @@ def rasterize_torch(proj: Projected, channels: torch.Tensor, width: int, height:
         out = out.index_put((pix,), torch.cat(out_chunks))
         t_final = t_final.index_put((pix,), torch.cat(t_chunks))
     if use_ckpt and not out.requires_grad:
-        # nothing reached a pixel: keep the outputs attached to the graph (exact zero gradients)
-        zero = sum(t[:0].sum() for t in (means2d, proj.conics, proj.opacities, channels))
-        out, t_final = out + zero, t_final + zero
+        # nothing reached a pixel: keep the outputs attached to the graph (exact zero gradients
+        # for channels and opacities; the `cpu` backend does the same)
+        out = out + channels[:0].sum()
+        t_final = t_final + proj.opacities[:0].sum()
     return out.reshape(height, width, C), t_final.reshape(height, width)
