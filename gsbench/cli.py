@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 from typing import Optional, Sequence
@@ -32,6 +33,19 @@ def _load(module: str):
     return importlib.import_module(f"gsbench.commands.{module}")
 
 
+def one_line(e: BaseException) -> str:
+    """The error as one line: OS errors as 'path: problem', multi-line messages (YAML parsers) joined."""
+    if isinstance(e, OSError) and e.filename is not None and e.strerror:
+        msg = f"{e.filename}: {e.strerror}"
+        if e.errno in (errno.EEXIST, errno.ENOTDIR):
+            msg += " (a part of this path is a file, not a folder)"
+        elif e.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+            msg += " (not writable/readable by this user)"
+    else:
+        msg = str(e)
+    return " | ".join(line.strip() for line in msg.splitlines() if line.strip()) or type(e).__name__
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     from gsbench.errors import InputError, NonFiniteError, NotBuiltError
 
@@ -45,8 +59,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except NotBuiltError as e:
         print(f"gsbench {args.command}: not built yet: {e}", file=sys.stderr)
         return 3
-    except (InputError, FileNotFoundError, NotADirectoryError, PermissionError, ValueError, NonFiniteError) as e:
-        print(f"gsbench {args.command}: error: {e}", file=sys.stderr)
+    except (InputError, ValueError, NonFiniteError, OSError) as e:
+        print(f"gsbench {args.command}: error: {one_line(e)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"gsbench {args.command}: interrupted; finished work is saved, re-run to resume", file=sys.stderr)

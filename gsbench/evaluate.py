@@ -516,6 +516,15 @@ def score_mask_folder(pred_dir: str | os.PathLike, layout_dir: str | os.PathLike
     return res
 
 
+def _check_known_names(pred_dir: Path, known: set[str], what: str, source: Path) -> None:
+    """A per-query / per-class prediction file (PRED/<view>/<name>.png) must name a known query / class:
+    a typo would otherwise be ignored silently and its query scored as missing."""
+    for f in sorted(pred_dir.glob("*/*.png")):
+        if f.name not in known:
+            names = ", ".join(sorted(k[:-4] for k in known))
+            raise InputError(f"{f}: unknown {what} {f.stem!r} (not in {source}; known: {names})")
+
+
 def _lerf_label_files(layout_dir: Path) -> list[Path]:
     files = sorted(layout_dir.glob("frame_*.json"))
     if not files:
@@ -529,8 +538,10 @@ def _score_lerf(pred_dir: Path, layout_dir: Path, ratio: float) -> dict:
     from gsbench.metrics import segmentation as M
     pairs, missing, view_names, view_miou = [], [], [], []
     resized = 0
-    for lf in _lerf_label_files(layout_dir):
-        w, h, objects = read_label_file(lf)
+    labels = [(lf, *read_label_file(lf)) for lf in _lerf_label_files(layout_dir)]
+    _check_known_names(pred_dir, {_query_file(str(o.category)) for _, _, _, objs in labels for o in objs}, "query",
+                       layout_dir)
+    for lf, w, h, objects in labels:
         gt_masks, _ = label_masks(objects, w, h, w, h)
         view_names.append(lf.stem)
         ious = []
@@ -572,6 +583,7 @@ def _score_3dovs(pred_dir: Path, layout_dir: Path, ratio: float) -> dict:
     classes = sorted(c.strip() for c in classes_txt.read_text(encoding="utf-8").splitlines() if c.strip())
     if not classes:
         raise InputError(f"{classes_txt}: no classes")
+    _check_known_names(pred_dir, {f"{c}.png" for c in classes}, "class", classes_txt)
     images = sorted(p for p in (layout_dir / "images").glob("*") if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
     views = sorted((d for d in seg.iterdir() if d.is_dir()), key=lambda d: (not d.name.isdigit(),
                    int(d.name) if d.name.isdigit() else 0, d.name))

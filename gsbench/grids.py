@@ -280,11 +280,13 @@ def _parse_scene(item: Any, where: str) -> SceneSpec:
     elif isinstance(item, str):
         if known_presets is not None and item in known_presets:
             spec = SceneSpec(preset=item)
-        elif "/" in item or item.startswith("$") or Path(item).exists() or known_presets is not None:
+        elif "/" in item or "$" in item or Path(item).exists():
             spec = SceneSpec(path=item)
+        elif known_presets is None:
+            spec = SceneSpec(preset=item)   # generator not importable: checked when the scene is made
         else:
-            # presets not importable yet: names without a slash are presets
-            spec = SceneSpec(preset=item)
+            raise InputError(f"{where}: {item!r} is neither a synthetic preset ({', '.join(sorted(known_presets))}) "
+                             "nor an existing folder (write paths with a '/', e.g. ./myscene)")
     else:
         raise InputError(f"{where}: a scene is a preset name, a folder path or a mapping, got {item!r}")
     if spec.preset and known_presets is not None and spec.preset not in known_presets:

@@ -168,3 +168,8 @@ def test_cli_list_dry_run_and_errors(capsys):
     assert "8 cells" in capsys.readouterr().out
     assert main(["ablate", "--grid", "tiny-test", "--out", "x", "--set", "gaussiands.latent_dims=3"]) == 1
     assert "did you mean gaussiands.latent_dim" in capsys.readouterr().err
+
+
+def test_unknown_scene_name_is_an_error():
+    with pytest.raises(InputError, match="neither a synthetic preset"):
+        _grid(scenes=["tabletop-smal"])

@@ -16,16 +16,21 @@ float64; numba compiles one specialisation per dtype and caches it on disk):
 that dtype, exactly as PyTorch compares a float32 tensor with a Python scalar.
 
 Numerical mirror of the `torch` reference (gsbench/render/torch_backend.py):
-- power, exp, alpha = min(opacity * G, ALPHA_MAX) and 1 - alpha in the working dtype;
+- power, exp, alpha = min(opacity * G, ALPHA_MAX) and 1 - alpha in the working dtype, with the
+  reference's operation order (no FMA contraction: fastmath is off);
 - transmittance is a float64 running product of (1 - alpha) rounded to the working dtype at each
   step, as torch.cumprod does on the CPU; a pixel stops before the Gaussian whose rounded
   transmittance would be <= T_MIN;
 - the weight of Gaussian k is alpha_k * T_k in the working dtype; channel sums are float64.
-The backward pass recomputes alpha with the same inline function, recovers the transmittance back
-to front (T_k = T_{k+1} / (1 - alpha_k), float64) from the stored final float64 transmittance and
-the index of the last contributing Gaussian, and writes each pair's gradient into a per-(tile,
-position) float64 row. `reduce_rows` then adds rows into per-Gaussian gradients in row order
-(tile index, then depth rank): a fixed order, so results are bit-identical for any thread count.
+Loop order: per tile, Gaussians outer (front to back in the forward, back to front in the
+backward) and pixels inner, in two passes: the exponent for all pixels of the tile (a plain loop
+LLVM can vectorise), then the pixels it reaches. Per-pixel state (transmittance, colour behind,
+done flag) lives in small per-tile arrays. The backward pass recovers the transmittance back to
+front (T_k = T_{k+1} / (1 - alpha_k), float64) from the stored final float64 transmittance and
+the index of the last contributing Gaussian, and sums each Gaussian's gradient over the tile's
+pixels in row-major order into one float64 row per (tile, position). `reduce_rows` then adds rows
+into per-Gaussian gradients in row order (tile index, then depth rank): a fixed order, so results
+are bit-identical for any thread count.
 """
 from __future__ import annotations
 
@@ -41,23 +46,6 @@ K_ONE, K_MHALF, K_ZERO, K_AMAX, K_AMIN, K_TMIN = 0, 1, 2, 3, 4, 5
 NCONST = 6
 
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
-
-
-@njit(inline="always", **_OPTS)
-def _pair(pxv, pyv, lp, j, consts):
-    """Alpha of Gaussian j at one pixel centre. Returns (used, alpha, G, raw, dx, dy)."""
-    dx = pxv - lp[j, MX]
-    dy = pyv - lp[j, MY]
-    power = consts[K_MHALF] * (lp[j, CA] * dx * dx + lp[j, CC] * dy * dy) - lp[j, CB] * dx * dy
-    zero = consts[K_ZERO]
-    if not (power <= zero) or power < lp[j, THR]:
-        return False, zero, zero, zero, dx, dy
-    G = np.exp(power)
-    raw = lp[j, OP] * G
-    alpha = min(raw, consts[K_AMAX])
-    if not (alpha >= consts[K_AMIN]):
-        return False, zero, zero, zero, dx, dy
-    return True, alpha, G, raw, dx, dy
 
 
 @njit(inline="always", **_OPTS)
@@ -111,144 +99,201 @@ def bin_tiles(x0, x1, y0, y1, width, height, tile_size):
     return counts, ranks
 
 
+@njit(inline="always", **_OPTS)
+def _tile_pixels(t, tiles_x, tile_size, width, height, pxc, pyc, qx, qy):
+    """Pixel-centre coordinates of tile t, row-major, into qx/qy. Returns (xa, ya, tile width, P)."""
+    ty = t // tiles_x
+    tx = t - ty * tiles_x
+    xa = tx * tile_size
+    ya = ty * tile_size
+    tw = min(width, xa + tile_size) - xa
+    th = min(height, ya + tile_size) - ya
+    for p in range(tw * th):
+        qx[p] = pxc[xa + p % tw]
+        qy[p] = pyc[ya + p // tw]
+    return xa, ya, tw, tw * th
+
+
+@njit(inline="always", **_OPTS)
+def _powers(qx, qy, n_pix, mx, my, a, b, c, mhalf, pw):
+    """Exponent of one Gaussian at every pixel of a tile (a plain loop LLVM can vectorise)."""
+    for p in range(n_pix):
+        dx = qx[p] - mx
+        dy = qy[p] - my
+        pw[p] = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
+
+
 @njit(parallel=True, **_OPTS)
 def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
                    out, t_out, t64_out, last_out):
     """Fused forward: all channels of every pixel, one tile per task.
 
-    Writes out (H,W,C) channel sums, t_out (H,W) final transmittance in the working dtype,
-    t64_out (H,W) the same in float64 and last_out (H,W) 1 + position of the last contributor.
+    Gaussians are visited front to back; for each, the exponent is computed for all pixels of the
+    tile at once (vectorised), then the pixels it reaches are composited. Writes out (H,W,C)
+    channel sums, t_out (H,W) final transmittance (working dtype), t64_out (H,W) the same in
+    float64 and last_out (H,W) = 1 + tile-list position of the last contributing Gaussian.
     """
     height, width, n_ch = out.shape
     n_tiles = tile_off.size - 1
     one = consts[K_ONE]
+    zero = consts[K_ZERO]
+    mhalf = consts[K_MHALF]
+    amax = consts[K_AMAX]
+    amin = consts[K_AMIN]
     tmin = consts[K_TMIN]
+    n_max = tile_size * tile_size
     for t in prange(n_tiles):
-        ty = t // tiles_x
-        tx = t - ty * tiles_x
-        xa = tx * tile_size
-        xb = min(width, xa + tile_size)
-        ya = ty * tile_size
-        yb = min(height, ya + tile_size)
+        qx = np.empty(n_max, gp.dtype)
+        qy = np.empty(n_max, gp.dtype)
+        xa, ya, tw, n_pix = _tile_pixels(t, tiles_x, tile_size, width, height, pxc, pyc, qx, qy)
+        pw = np.empty(n_pix, gp.dtype)
+        t64 = np.ones(n_pix, np.float64)
+        t_w = np.empty(n_pix, gp.dtype)        # transmittance before the next Gaussian, working dtype
+        rnd = np.empty(1, gp.dtype)             # rounds a float64 to the working dtype
+        done = np.zeros(n_pix, np.bool_)
+        lastj = np.zeros(n_pix, np.int32)
+        acc = np.zeros((n_pix, n_ch), np.float64)
+        for p in range(n_pix):
+            t_w[p] = one
+        n_live = n_pix
         start = tile_off[t]
         n = tile_off[t + 1] - start
-        lp = np.empty((n, NPARAM), gp.dtype)
-        lc = np.empty((n, n_ch), ch.dtype)
         for j in range(n):
             g = ranks[start + j]
-            for k in range(NPARAM):
-                lp[j, k] = gp[g, k]
-            for c in range(n_ch):
-                lc[j, c] = ch[g, c]
-        acc = np.empty(n_ch, np.float64)
-        for py in range(ya, yb):
-            pyv = pyc[py]
-            for px in range(xa, xb):
-                pxv = pxc[px]
-                for c in range(n_ch):
-                    acc[c] = 0.0
-                t64 = 1.0
-                t_w = one                      # transmittance before Gaussian j, working dtype
-                lastj = 0
-                for j in range(n):
-                    used, alpha, G, raw, dx, dy = _pair(pxv, pyv, lp, j, consts)
-                    if not used:
-                        continue
-                    t64_next = t64 * (one - alpha)
-                    t_out[py, px] = t64_next       # round to the working dtype (as torch.cumprod)
-                    t_next = t_out[py, px]
-                    if not (t_next > tmin):
-                        break
-                    w = alpha * t_w
-                    for c in range(n_ch):
-                        acc[c] += w * lc[j, c]
-                    t64 = t64_next
-                    t_w = t_next
-                    lastj = j + 1
-                for c in range(n_ch):
-                    out[py, px, c] = acc[c]
-                t_out[py, px] = t64
-                t64_out[py, px] = t64
-                last_out[py, px] = lastj
+            thr = gp[g, THR]
+            op = gp[g, OP]
+            _powers(qx, qy, n_pix, gp[g, MX], gp[g, MY], gp[g, CA], gp[g, CB], gp[g, CC], mhalf, pw)
+            for p in range(n_pix):
+                power = pw[p]
+                if not (power <= zero) or power < thr or done[p]:
+                    continue
+                alpha = min(op * np.exp(power), amax)
+                if not (alpha >= amin):
+                    continue
+                t64_next = t64[p] * (one - alpha)
+                rnd[0] = t64_next
+                t_next = rnd[0]
+                if not (t_next > tmin):          # stop before this Gaussian
+                    done[p] = True
+                    n_live -= 1
+                    continue
+                w = alpha * t_w[p]
+                for k in range(n_ch):
+                    acc[p, k] += w * ch[g, k]
+                t64[p] = t64_next
+                t_w[p] = t_next
+                lastj[p] = j + 1
+            if n_live == 0:
+                break
+        for p in range(n_pix):
+            py = ya + p // tw
+            px = xa + p % tw
+            for k in range(n_ch):
+                out[py, px, k] = acc[p, k]
+            t_out[py, px] = t64[p]
+            t64_out[py, px] = t64[p]
+            last_out[py, px] = lastj[p]
 
 
 @njit(parallel=True, **_OPTS)
 def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
                     t64_in, last_in, g_out, g_t, t_lo, t_hi, rows):
-    """Per-pair gradients of tiles [t_lo, t_hi) into rows[tile_off[t] - tile_off[t_lo] + j]."""
+    """Gradient rows of tiles [t_lo, t_hi): row tile_off[t] - tile_off[t_lo] + j is the gradient
+    contribution of the tile's j-th Gaussian, summed over the tile's pixels in row-major order.
+
+    Gaussians are visited back to front; every pixel carries its transmittance (recovered as
+    T_j = T_{j+1} / (1 - alpha_j) from the stored final value) and the colour behind it.
+    """
     height, width, n_ch = g_out.shape
     one = consts[K_ONE]
+    zero = consts[K_ZERO]
+    mhalf = consts[K_MHALF]
     amax = consts[K_AMAX]
+    amin = consts[K_AMIN]
     base = tile_off[t_lo]
     n_cols = rows.shape[1]
+    n_max = tile_size * tile_size
     for i in prange(t_hi - t_lo):
         t = t_lo + i
-        ty = t // tiles_x
-        tx = t - ty * tiles_x
-        xa = tx * tile_size
-        xb = min(width, xa + tile_size)
-        ya = ty * tile_size
-        yb = min(height, ya + tile_size)
         start = tile_off[t]
         n = tile_off[t + 1] - start
         r0 = start - base
-        for j in range(n):
-            for k in range(n_cols):
-                rows[r0 + j, k] = 0.0
         if n == 0:
             continue
-        lp = np.empty((n, NPARAM), gp.dtype)
-        lc = np.empty((n, n_ch), np.float64)
-        for j in range(n):
+        qx = np.empty(n_max, gp.dtype)
+        qy = np.empty(n_max, gp.dtype)
+        xa, ya, tw, n_pix = _tile_pixels(t, tiles_x, tile_size, width, height, pxc, pyc, qx, qy)
+        pw = np.empty(n_pix, gp.dtype)
+        tr = np.empty(n_pix, np.float64)
+        t_fin = np.empty(n_pix, np.float64)
+        g_tf = np.empty(n_pix, np.float64)
+        last = np.empty(n_pix, np.int64)
+        gc = np.empty((n_pix, n_ch), np.float64)
+        s = np.zeros((n_pix, n_ch), np.float64)
+        acc = np.empty(n_cols, np.float64)
+        j_top = 0
+        for p in range(n_pix):
+            py = ya + p // tw
+            px = xa + p % tw
+            t_fin[p] = t64_in[py, px]
+            tr[p] = t_fin[p]
+            g_tf[p] = g_t[py, px]
+            last[p] = last_in[py, px]
+            j_top = max(j_top, last[p])
+            for k in range(n_ch):
+                gc[p, k] = g_out[py, px, k]
+        for j in range(j_top, n):
+            for k in range(n_cols):
+                rows[r0 + j, k] = 0.0
+        for j in range(j_top - 1, -1, -1):
             g = ranks[start + j]
-            for k in range(NPARAM):
-                lp[j, k] = gp[g, k]
-            for c in range(n_ch):
-                lc[j, c] = ch[g, c]
-        s = np.empty(n_ch, np.float64)
-        gc = np.empty(n_ch, np.float64)
-        for py in range(ya, yb):
-            pyv = pyc[py]
-            for px in range(xa, xb):
-                nlast = last_in[py, px]
-                if nlast == 0:
+            mx = gp[g, MX]
+            my = gp[g, MY]
+            a = gp[g, CA]
+            b = gp[g, CB]
+            c = gp[g, CC]
+            op = gp[g, OP]
+            thr = gp[g, THR]
+            a64 = np.float64(a)
+            b64 = np.float64(b)
+            c64 = np.float64(c)
+            _powers(qx, qy, n_pix, mx, my, a, b, c, mhalf, pw)
+            for k in range(n_cols):
+                acc[k] = 0.0
+            for p in range(n_pix):
+                if j >= last[p]:
                     continue
-                pxv = pxc[px]
-                t_fin = t64_in[py, px]
-                tr = t_fin
-                g_tf = np.float64(g_t[py, px])
-                for c in range(n_ch):
-                    gc[c] = g_out[py, px, c]
-                    s[c] = 0.0
-                for j in range(nlast - 1, -1, -1):
-                    used, alpha, G, raw, dx, dy = _pair(pxv, pyv, lp, j, consts)
-                    if not used:
-                        continue
-                    a64 = np.float64(alpha)
-                    om = np.float64(one - alpha)
-                    tr = tr / om                 # transmittance before Gaussian j
-                    w = a64 * tr
-                    r = r0 + j
-                    d_alpha = 0.0
-                    for c in range(n_ch):
-                        cv = lc[j, c]
-                        rows[r, G_CH + c] += w * gc[c]
-                        d_alpha += gc[c] * (cv - s[c])
-                        s[c] = a64 * cv + om * s[c]
-                    d_alpha = d_alpha * tr - g_tf * t_fin / om
-                    if raw <= amax:              # no gradient through the clamp
-                        d_pow = d_alpha * np.float64(raw)
-                        dx64 = np.float64(dx)
-                        dy64 = np.float64(dy)
-                        a = np.float64(lp[j, CA])
-                        b = np.float64(lp[j, CB])
-                        c2 = np.float64(lp[j, CC])
-                        rows[r, G_OP] += d_alpha * np.float64(G)
-                        rows[r, G_MX] += d_pow * (a * dx64 + b * dy64)
-                        rows[r, G_MY] += d_pow * (b * dx64 + c2 * dy64)
-                        rows[r, G_CA] += d_pow * (-0.5 * dx64 * dx64)
-                        rows[r, G_CB] += d_pow * (-dx64 * dy64)
-                        rows[r, G_CC] += d_pow * (-0.5 * dy64 * dy64)
+                power = pw[p]
+                if not (power <= zero) or power < thr:
+                    continue
+                G = np.exp(power)
+                raw = op * G
+                alpha = min(raw, amax)
+                if not (alpha >= amin):
+                    continue
+                al64 = np.float64(alpha)
+                om = np.float64(one - alpha)
+                tr[p] = tr[p] / om                 # transmittance before Gaussian j
+                w = al64 * tr[p]
+                d_alpha = 0.0
+                for k in range(n_ch):
+                    cv = np.float64(ch[g, k])
+                    acc[G_CH + k] += w * gc[p, k]
+                    d_alpha += gc[p, k] * (cv - s[p, k])
+                    s[p, k] = al64 * cv + om * s[p, k]
+                d_alpha = d_alpha * tr[p] - g_tf[p] * t_fin[p] / om
+                if raw <= amax:                    # no gradient through the clamp
+                    d_pow = d_alpha * np.float64(raw)
+                    dx = np.float64(qx[p] - mx)
+                    dy = np.float64(qy[p] - my)
+                    acc[G_OP] += d_alpha * np.float64(G)
+                    acc[G_MX] += d_pow * (a64 * dx + b64 * dy)
+                    acc[G_MY] += d_pow * (b64 * dx + c64 * dy)
+                    acc[G_CA] += d_pow * (-0.5 * dx * dx)
+                    acc[G_CB] += d_pow * (-dx * dy)
+                    acc[G_CC] += d_pow * (-0.5 * dy * dy)
+            for k in range(n_cols):
+                rows[r0 + j, k] = acc[k]
 
 
 @njit(parallel=True, **_OPTS)
