@@ -220,6 +220,10 @@ def _attach_synthetic(scene: Scene, root: Path) -> None:
         d = read_npy(p)
         if d.shape != (sizes[i][1], sizes[i][0]):
             raise InputError(f"{p}: depth is {d.shape}, image is {sizes[i][1]}x{sizes[i][0]}")
+        bad = ~np.isfinite(d)
+        if bad.any():   # the format says finite z with 0 where no surface; NaN/inf would poison the depth prior
+            raise InputError(f"{p}: depth has {int(np.isnan(d).sum())} NaN and {int(np.isinf(d).sum())} inf pixels "
+                             "(expected finite camera-space z, 0 where no surface)")
         return d.astype(np.float32)
 
     def instances(i: int) -> np.ndarray:

@@ -10,6 +10,7 @@ Override values are parsed as YAML (`1e-3`, `true`, `[1, 2]`, `null`). Unknown k
 from __future__ import annotations
 
 import copy
+import re
 import hashlib
 import json
 from pathlib import Path
@@ -46,9 +47,22 @@ def _merge(base: dict, over: Mapping, where: str, path: str = "") -> dict:
             raise InputError(f"{where}: unknown config key {key!r}")
         if isinstance(base[k], dict) and isinstance(v, Mapping):
             _merge(base[k], v, where, key + ".")
+        elif (isinstance(base[k], (int, float)) and not isinstance(base[k], bool)
+              and isinstance(v, (str, bool, list, Mapping))):     # a number (or null) is expected
+            raise InputError(f"{where}: {key} must be a number (default {base[k]!r}), got {v!r}")
         else:
             base[k] = copy.deepcopy(v)
     return base
+
+
+_FLOAT_RE = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+
+
+def _number_or_value(v: Any) -> Any:
+    """YAML 1.1 reads '1e-4' / '1e38' as strings; a command-line user means the number."""
+    if isinstance(v, str) and _FLOAT_RE.match(v.strip()):
+        return float(v)
+    return v
 
 
 def parse_overrides(overrides: Mapping | list[str] | None) -> dict:
@@ -64,7 +78,7 @@ def parse_overrides(overrides: Mapping | list[str] | None) -> dict:
                 raise InputError(f"--set {s!r}: expected key=value (e.g. train.iterations=300)")
             k, v = s.split("=", 1)
             try:
-                items.append((k.strip(), yaml.safe_load(v)))
+                items.append((k.strip(), _number_or_value(yaml.safe_load(v))))
             except yaml.YAMLError as e:
                 raise InputError(f"--set {s!r}: value is not valid YAML ({e})") from None
     out: dict = {}

@@ -464,7 +464,7 @@ def cell_config(cell: Cell, runs_dir: Path, grid_axis_keys: list[str]) -> dict:
     from gsbench.config import load_config
     overrides = dict(cell.overrides)
     overrides["priors.cache_dir"] = str((runs_dir / CACHE_DIRNAME).resolve())
-    config = load_config(cell.method, cell.preset, [f"{k}={_yaml_scalar(v)}" for k, v in overrides.items()])
+    config = load_config(cell.method, cell.preset, overrides)   # {dotted key: value}, no YAML round trip
     config["study"] = cell.study
     grid_values = {}
     for k in grid_axis_keys:
@@ -474,10 +474,6 @@ def cell_config(cell: Cell, runs_dir: Path, grid_axis_keys: list[str]) -> dict:
             grid_values[k] = None
     config["grid"] = grid_values
     return config
-
-
-def _yaml_scalar(v: Any) -> str:
-    return yaml.safe_dump(v, default_flow_style=True).strip().removesuffix("...").strip()
 
 
 @dataclass

@@ -47,7 +47,7 @@ from gsbench.render.projection import Projected
 os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
 
-ROW_BUDGET_BYTES = 64 * 2**20   # gradient rows of one backward wave (float64)
+ROW_BUDGET_BYTES = 2**18         # gradient rows of one backward wave (float64; at least one tile)
 SKIP_MARGIN = 1e-3              # see cpu_kernels: exponent bound below which alpha < ALPHA_MIN surely
 
 
@@ -91,7 +91,7 @@ class _Rasterize(torch.autograd.Function):
         r = radii.detach()[order].to(dtype)
         x0, x1 = md[:, 0] - r[:, 0], md[:, 0] + r[:, 0]
         y0, y1 = md[:, 1] - r[:, 1], md[:, 1] + r[:, 1]
-        tile_off, ranks = K.bin_tiles(_numpy(x0), _numpy(x1), _numpy(y0), _numpy(y1),
+        tile_off, ranks, rank_off, rank_pairs = K.bin_tiles(_numpy(x0), _numpy(x1), _numpy(y0), _numpy(y1),
                                       width, height, tile_size)
         gp_np = _numpy(gp)
         ch_np = _numpy(channels.detach()[order])
@@ -109,6 +109,7 @@ class _Rasterize(torch.autograd.Function):
                              out, t_out, t64, last)
         ctx.kernel_args = (gp_np, ch_np, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last)
         ctx.order = order
+        ctx.rank_index = (rank_off, rank_pairs)
         ctx.m, ctx.n_ch = m, n_ch
         return torch.from_numpy(out), torch.from_numpy(t_out)
 
@@ -121,27 +122,30 @@ class _Rasterize(torch.autograd.Function):
         g_out_np = _numpy(g_out.to(dtype))
         g_t_np = _numpy(g_t.to(dtype))
         n_cols = K.G_CH + n_ch
-        grad = np.zeros((m, n_cols), dtype=np.float64)
+        full_np = np.zeros((m, n_cols), dtype=gp_np.dtype)   # gradients in field order
         n_tiles = tile_off.size - 1
         budget = max(1, ROW_BUDGET_BYTES // (8 * n_cols))
         _set_threads()
+        waves = []                # consecutive tiles whose rows fit in the budget (at least one tile)
         t_lo = 0
         while t_lo < n_tiles:
             t_hi = t_lo + 1
             while t_hi < n_tiles and tile_off[t_hi + 1] - tile_off[t_lo] <= budget:
                 t_hi += 1
-            n_rows = int(tile_off[t_hi] - tile_off[t_lo])
-            if n_rows > 0:
-                rows = np.empty((n_rows, n_cols), dtype=np.float64)
-                with numba.parallel_chunksize(1):
-                    K.raster_backward(gp_np, ch_np, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                                      t64, last, g_out_np, g_t_np, t_lo, t_hi, rows)
-                K.reduce_rows(tile_off, ranks, t_lo, t_hi, rows, grad)
-                del rows
+            if tile_off[t_hi] > tile_off[t_lo]:
+                waves.append((t_lo, t_hi))
             t_lo = t_hi
-        g = torch.from_numpy(grad).to(dtype)
-        full = torch.empty_like(g)
-        full[ctx.order] = g
+        max_rows = max((int(tile_off[b] - tile_off[a]) for a, b in waves), default=0)
+        rows = np.empty((max_rows, n_cols), dtype=np.float64)
+        rank_off, rank_pairs = ctx.rank_index
+        order_np = ctx.order.numpy()
+        for t_lo, t_hi in waves:
+            with numba.parallel_chunksize(1):
+                K.raster_backward(gp_np, ch_np, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
+                                  t64, last, g_out_np, g_t_np, t_lo, t_hi, rows)
+                K.reduce_rows(rank_off, rank_pairs, order_np, tile_off[t_lo], tile_off[t_hi], rows, full_np)
+        del rows
+        full = torch.from_numpy(full_np)
         need = ctx.needs_input_grad
         return (full[:, K.G_MX:K.G_MY + 1] if need[0] else None,
                 full[:, K.G_CA:K.G_CC + 1] if need[1] else None,

@@ -69,13 +69,19 @@ def _tile_range(v0, v1, size, tile_size, n_tiles):
 
 @njit(**_OPTS)
 def bin_tiles(x0, x1, y0, y1, width, height, tile_size):
-    """Per-tile lists of Gaussian ranks (boxes given front to back). Returns (offsets, ranks)."""
+    """Per-tile lists of Gaussian ranks (boxes given front to back).
+
+    Returns (tile_off (T+1,), ranks (P,), rank_off (M+1,), rank_pairs (P,)): the pairs of tile t
+    are ranks[tile_off[t]:tile_off[t+1]] (depth order); the pair indices of Gaussian g are
+    rank_pairs[rank_off[g]:rank_off[g+1]], in increasing tile order.
+    """
     tiles_x = (width + tile_size - 1) // tile_size
     tiles_y = (height + tile_size - 1) // tile_size
     n_tiles = tiles_x * tiles_y
     m = x0.size
     rng = np.empty((m, 4), np.int64)
     counts = np.zeros(n_tiles + 1, np.int64)
+    rank_off = np.zeros(m + 1, np.int64)
     for g in range(m):
         xl, xh = _tile_range(x0[g], x1[g], width, tile_size, tiles_x)
         yl, yh = _tile_range(y0[g], y1[g], height, tile_size, tiles_y)
@@ -83,20 +89,25 @@ def bin_tiles(x0, x1, y0, y1, width, height, tile_size):
         rng[g, 1] = xh
         rng[g, 2] = yl
         rng[g, 3] = yh
+        rank_off[g + 1] = rank_off[g] + max(0, xh - xl + 1) * max(0, yh - yl + 1)
         for ty in range(yl, yh + 1):
             for tx in range(xl, xh + 1):
                 counts[ty * tiles_x + tx + 1] += 1
     for t in range(n_tiles):
         counts[t + 1] += counts[t]
     ranks = np.empty(counts[n_tiles], np.int32)
+    rank_pairs = np.empty(counts[n_tiles], np.int64)
     cursor = counts[:n_tiles].copy()
     for g in range(m):
+        k = rank_off[g]
         for ty in range(rng[g, 2], rng[g, 3] + 1):
             for tx in range(rng[g, 0], rng[g, 1] + 1):
                 t = ty * tiles_x + tx
                 ranks[cursor[t]] = g
+                rank_pairs[k] = cursor[t]
+                k += 1
                 cursor[t] += 1
-    return counts, ranks
+    return counts, ranks, rank_off, rank_pairs
 
 
 @njit(inline="always", **_OPTS)
@@ -297,10 +308,24 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
 
 
 @njit(parallel=True, **_OPTS)
-def reduce_rows(tile_off, ranks, t_lo, t_hi, rows, grad):
-    """grad[rank] += rows in row order (tile, then rank): one column per task, fixed order."""
-    base = tile_off[t_lo]
-    n_rows = tile_off[t_hi] - base
-    for k in prange(rows.shape[1]):
-        for r in range(n_rows):
-            grad[ranks[base + r], k] += rows[r, k]
+def reduce_rows(rank_off, rank_pairs, order, p_lo, p_hi, rows, out):
+    """out[order[g]] += sum of Gaussian g's rows among pairs [p_lo, p_hi), in tile order.
+
+    One Gaussian per task; the sum is float64 in increasing tile order and is added to `out`
+    (the working dtype, field order) once per wave: a fixed order for any thread count.
+    """
+    n_cols = rows.shape[1]
+    for g in prange(rank_off.size - 1):
+        k0 = rank_off[g]
+        k1 = rank_off[g + 1]
+        if k0 == k1 or rank_pairs[k1 - 1] < p_lo or rank_pairs[k0] >= p_hi:
+            continue
+        o = order[g]
+        for c in range(n_cols):
+            acc = 0.0
+            for k in range(k0, k1):
+                q = rank_pairs[k]
+                if q >= p_lo and q < p_hi:
+                    acc += rows[q - p_lo, c]
+            out[o, c] += acc
+

@@ -1,0 +1,163 @@
+"""Interrupting training loses nothing already written, and a re-run resumes; non-finite training stops cleanly.
+
+These start the real `gsbench` executable as a subprocess, interrupt it (SIGINT, then SIGKILL) right
+after it wrote a checkpoint, re-run the same command and check the run folder is complete and valid.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from gsbench.store import load_torch, read_json
+
+EXE = str(Path(sys.executable).parent / "gsbench")
+ITERS = 200
+CKPT_EVERY = 20
+LOG_EVERY = 5
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory) -> Path:
+    """A tiny scene; every run of this module lives next to it and shares the priors cache."""
+    root = tmp_path_factory.mktemp("killresume")
+    subprocess.run([EXE, "make-scene", "--preset", "tabletop-small", "--views", "8", "--resolution", "32x24",
+                    "--out", str(root / "scene"), "--quiet"], check=True, capture_output=True, timeout=300)
+    return root
+
+
+def train_cmd(scene: Path, out: Path, *sets: str) -> list[str]:
+    cmd = [EXE, "train", "--method", "gaussiands", "--scene", str(scene), "--preset", "cpu-small", "--out", str(out),
+           "--no-progress"]
+    for s in sets:
+        cmd += ["--set", s]
+    return cmd
+
+
+def checkpoint_step(run: Path) -> int:
+    p = run / "checkpoint.pt"
+    if not p.exists():
+        return -1
+    return int(load_torch(p)["step"])
+
+
+def start_and_interrupt(cmd: list[str], run: Path, after_step: int, sig: int, log: Path, timeout: float = 900) -> int:
+    """Start `cmd`, wait for a checkpoint newer than `after_step`, send `sig`; return the checkpoint step."""
+    with open(log, "w") as f:
+        proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        t0 = time.time()
+        while True:
+            step = checkpoint_step(run)
+            if step > after_step:
+                break
+            if proc.poll() is not None:
+                pytest.fail(f"training ended (exit {proc.returncode}) before a checkpoint past step {after_step}:\n"
+                            + log.read_text()[-2000:])
+            if time.time() - t0 > timeout:
+                pytest.fail("no checkpoint within the time limit")
+            time.sleep(0.1)
+        os.killpg(proc.pid, sig)
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:   # only our own process group
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    if sig == signal.SIGKILL:
+        assert proc.returncode == -signal.SIGKILL
+    else:
+        assert proc.returncode == 130, log.read_text()[-2000:]
+        assert "interrupted" in log.read_text()
+    return step
+
+
+def loss_lines(run: Path) -> list[dict]:
+    """Every line of train_log.jsonl must be complete JSON (no torn lines after a kill + resume)."""
+    lines = (run / "train_log.jsonl").read_text().splitlines()
+    out = [json.loads(ln) for ln in lines if ln.strip()]
+    return [r for r in out if "loss" in r]
+
+
+@pytest.mark.slow
+def test_sigint_then_sigkill_then_resume_gives_a_complete_run(workspace, tmp_path):
+    scene, run = workspace / "scene", workspace / "run_kill"
+    cmd = train_cmd(scene, run, f"train.iterations={ITERS}", f"train.checkpoint_every={CKPT_EVERY}",
+                    f"train.log_every={LOG_EVERY}", "train.eval_every=100")
+
+    # 1) Ctrl-C right after the first checkpoint: exit 130, status says interrupted, checkpoint kept
+    s1 = start_and_interrupt(cmd, run, 0, signal.SIGINT, tmp_path / "a.log")
+    assert 0 < s1 < ITERS
+    st = read_json(run / "status.json")
+    assert st["state"] == "failed" and "interrupted" in st["message"]
+    assert checkpoint_step(run) >= s1
+    run_id = read_json(run / "config.json")["run_id"]
+
+    # 2) re-run, SIGKILL right after it wrote a newer checkpoint (it must have resumed, not restarted)
+    s2 = start_and_interrupt(cmd, run, s1, signal.SIGKILL, tmp_path / "b.log")
+    assert s1 < s2 < ITERS
+    assert read_json(run / "status.json")["state"] == "running"      # killed: nothing could update it
+    before = [r for r in loss_lines(run) if r["step"] <= s2]
+
+    # 3) re-run to the end
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+
+    st = read_json(run / "status.json")
+    assert st["state"] == "done" and st["message"] == ""
+    assert read_json(run / "config.json")["run_id"] == run_id
+    ck = load_torch(run / "checkpoint.pt")
+    assert ck["step"] == ITERS
+    assert all(bool(torch.isfinite(v).all()) for v in ck["params"].values())
+    summary = read_json(run / "train_summary.json")
+    assert summary["status"] == "done" and summary["iterations"] == ITERS
+    for name in ("env.json", "config.json"):
+        assert isinstance(read_json(run / name), dict)
+
+    rows = loss_lines(run)
+    steps = [r["step"] for r in rows]
+    # every logged step exactly once: the resumed runs continued from their checkpoint instead of
+    # starting again from 0 (which would repeat steps) or skipping ahead
+    assert steps == list(range(LOG_EVERY, ITERS + 1, LOG_EVERY))
+    # what was written before the kill up to the checkpoint is kept as it was
+    assert [r for r in rows if r["step"] <= s2] == before
+    assert all(np.isfinite(r["loss"]["total"]) for r in rows)
+
+    # the finished run loads and evaluates into a valid results.json
+    from gsbench.runs import load_run
+    method, cfg, _ = load_run(run)
+    assert cfg["run_id"] == run_id and method.field.num > 0
+    proc = subprocess.run([EXE, "eval", str(run), "--no-progress"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    res = read_json(run / "results.json")
+    assert res["status"] == "done" and res["run_id"] == run_id
+    assert res["metrics"]["psnr"] is not None and np.isfinite(res["metrics"]["psnr"])
+
+
+@pytest.mark.slow
+def test_nonfinite_training_stops_with_status_and_keeps_last_good_checkpoint(workspace):
+    """A colour learning rate of 1e30 makes step 1 finite (colours ~1e30) and the step-2 loss overflow."""
+    scene, run = workspace / "scene", workspace / "run_nonfinite"
+    cmd = train_cmd(scene, run, "train.iterations=20", "train.checkpoint_every=1", "train.eval_every=0",
+                    "train.lr.color=1e30")
+    t0 = time.time()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert time.time() - t0 < 600                                      # stopped, did not hang
+    assert proc.returncode == 1
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert lines[-1].startswith("gsbench train: error: non-finite loss at step 2")
+    assert "Traceback" not in proc.stderr
+    st = read_json(run / "status.json")
+    assert st["state"] == "nonfinite" and "non-finite loss at step 2" in st["message"]
+    assert read_json(run / "train_summary.json")["status"] == "nonfinite"
+    assert not (run / "model.pt").exists()                             # no silent NaN model
+    ck = load_torch(run / "checkpoint.pt")                             # the last good checkpoint
+    assert ck["step"] == 1
+    assert all(bool(torch.isfinite(v).all()) for v in ck["params"].values())
