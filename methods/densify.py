@@ -172,13 +172,13 @@ def densify_and_prune(ps: ParamSet, stats: DensifyStats, cfg: dict, extent: floa
         sc = torch.exp(ps.params["log_scales"].data.clamp(-30, 30)).max(-1).values
         prune |= stats.max_radii > float(cfg["max_screen_size"])
         prune |= sc > 0.1 * extent
+    n_pruned = int((prune & keep).sum())          # split sources are counted as splits, not prunes
     keep &= ~prune
-    n_pruned = int((~keep).sum()) - n_split_src
     if keep.sum() == 0:   # never prune everything: keep the most opaque one
         keep[torch.argmax(opac)] = True
     ps.keep(keep)
     stats.reset(ps.num)
-    return {"cloned": n_clone, "split": n_split_src, "pruned": max(0, n_pruned), "n_gaussians": ps.num}
+    return {"cloned": n_clone, "split": n_split_src, "pruned": n_pruned, "n_gaussians": ps.num}
 
 
 def P_opacity(ps: ParamSet) -> torch.Tensor:

@@ -15,7 +15,7 @@ checkpoint is kept.
 """
 from __future__ import annotations
 
-import math
+import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,10 +29,9 @@ from gsbench.errors import NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera
-from gsbench.store import append_jsonl, load_torch, read_jsonl, save_torch_atomic, write_json_atomic, write_text_atomic
+from gsbench.store import append_jsonl, load_torch, read_jsonl, save_torch_atomic, write_text_atomic
 
 from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
-from gsbench.methods.losses import reconstruction_loss
 
 CHECKPOINT = "checkpoint.pt"
 TRAIN_LOG = "train_log.jsonl"
@@ -196,16 +195,20 @@ class Trainer:
             g["lr"] = v
         return v
 
+    def _kept(self) -> str:
+        ck = self.run_dir / CHECKPOINT
+        return f"the last good checkpoint is kept in {ck}" if ck.exists() else "no checkpoint was written before this step"
+
     def _check_finite(self, what: str, value: torch.Tensor | None = None) -> None:
         if value is not None:
             if not bool(torch.isfinite(value).all()):
                 raise NonFiniteError(f"non-finite {what} at step {self.step} (phase {self.phase}); "
-                                     f"the last good checkpoint is kept in {self.run_dir / CHECKPOINT}")
+                                     f"{self._kept()}")
             return
         for k, p in self.ps.params.items():
             if not bool(torch.isfinite(p.data).all()):
                 raise NonFiniteError(f"non-finite parameter {k!r} at step {self.step} (phase {self.phase}); "
-                                     f"the last good checkpoint is kept in {self.run_dir / CHECKPOINT}")
+                                     f"{self._kept()}")
 
     # ------------------------------------------------------------------ loop
     def run(self, progress: bool = True, resume_state: Optional[dict] = None) -> GaussianField:
@@ -215,7 +218,6 @@ class Trainer:
             # drop log lines written after the checkpoint (they will be produced again)
             lines = [r for r in read_jsonl(log_path)
                      if r.get("phase") != self.phase or int(r.get("step", 0)) <= self.step]
-            import json
             write_text_atomic(log_path, "".join(json.dumps(r) + "\n" for r in lines))
         d = self.tcfg["densify"]
         log_every = max(1, int(self.tcfg["log_every"]))
@@ -243,7 +245,13 @@ class Trainer:
                 do_stats = self.densify and self.step < int(d["until_iter"])
                 if do_stats and out.radii is not None:
                     self.stats.update(out.means2d.grad if out.means2d is not None else None, out.radii, cam.width, cam.height)
-                self.ps.optimizer.step()
+                try:
+                    self.ps.optimizer.step()
+                except RuntimeError as e:   # e.g. Adam's lr / (1 - beta1) overflows float32 (lr ~1e38)
+                    if "overflow" not in str(e):
+                        raise
+                    raise NonFiniteError(f"optimiser step overflowed at step {self.step} (phase {self.phase}): {e}; "
+                                         f"{self._kept()}") from None
                 self._check_finite("parameters")
                 info = {}
                 if self.densify and self.step < int(d["until_iter"]):
@@ -307,4 +315,4 @@ def load_checkpoint_if_any(run_dir: Path) -> Optional[dict]:
 
 
 __all__ = ["Trainer", "TrainViews", "LossResult", "init_field", "periodic_eval", "load_checkpoint_if_any",
-           "reconstruction_loss", "CHECKPOINT", "TRAIN_LOG", "math"]
+           "CHECKPOINT", "TRAIN_LOG"]

@@ -157,6 +157,16 @@ def test_corrupt_transforms_json(scene, tmp_path, capsys):
     assert str(s / "transforms.json") in msg and "corrupt or truncated JSON" in msg
 
 
+def test_truncated_results_json_in_collect(trained_run, tmp_path, capsys):
+    runs = tmp_path / "runs"
+    shutil.copytree(trained_run, runs / "r1")
+    p = runs / "r1" / "results.json"
+    p.write_text(json.dumps({"run_id": "x", "metrics": {"psnr": 20.0}, "status": "done"})[:30])
+    code, msg = cli_error(capsys, ["collect", str(runs)])
+    assert code == 1
+    assert str(p) in msg and "corrupt or truncated JSON" in msg
+
+
 # ------------------------------------------------------------------------------------ checkpoints
 def test_truncated_model_checkpoint_in_eval(trained_run, tmp_path, capsys):
     run = tmp_path / "run"

@@ -116,3 +116,20 @@ def test_comparison_helpers_detect_errors():
     assert stress.scaled_err(np.array([np.nan]), np.array([1.0])) == math.inf
     assert not stress.all_finite(torch.tensor([0.0, float("inf")]))
     assert stress.all_finite(np.zeros(3), None)
+
+
+@pytest.mark.slow
+def test_full_battery_passes_via_the_executable(tmp_path):
+    """CI runs the whole `gsbench stress` (every backend present, every component): exit 0, one CSV row per case."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    exe = Path(sys.executable).parent / "gsbench"
+    proc = subprocess.run([str(exe), "stress", "--out", str(tmp_path)], capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stdout[-4000:]
+    df = pd.read_csv(tmp_path / "stress.csv")
+    cases, skipped = stress.all_cases()
+    assert len(df) == len(cases) + len(skipped) and not skipped
+    assert df["pass"].all()
+    assert set(REQUIRED_COMPONENTS) <= set(df["component"])

@@ -11,16 +11,17 @@ autograd carries them through the projection.
 How it runs (kernels in gsbench/render/cpu_kernels.py):
 1. sort the visible Gaussians by depth (stable), bin them into 16x16 tiles with the reference's
    box-overlap test (serial, O(pairs));
-2. forward: one task per tile over all cores (numba prange, dynamic chunks of one tile); per pixel
-   it composites every channel in one pass and stores only the final transmittance and the index
-   of the last contributing Gaussian;
+2. forward: one task per tile over all cores (numba prange, dynamic chunks of one tile); each
+   Gaussian, front to back, is composited into all channels of the tile's pixels in one pass; per
+   pixel only the final transmittance and the index of the last contributing Gaussian are kept;
 3. backward: per tile, back to front, the transmittance is recovered as T_k = T_{k+1} / (1 - a_k);
-   each (tile, Gaussian) pair gets its own float64 gradient row; rows are added to the
-   per-Gaussian gradients in a fixed order (tile index, then depth rank). Tiles are processed in
-   waves whose rows fit in ROW_BUDGET_BYTES, so memory stays bounded on large scenes.
-Determinism rule: every pixel is computed by one task, every pair row by one task, and the
-reduction order is fixed, so the same inputs give bit-identical outputs and gradients for any
-number of threads.
+   each (tile, Gaussian) pair gets its own float64 gradient row (summed over the tile's pixels in
+   row-major order). Tiles are processed in waves (consecutive tiles whose rows fit in
+   ROW_BUDGET_BYTES, at least one tile); after each wave, every Gaussian's rows are summed in
+   float64 in increasing tile order and added once to its gradient (working dtype).
+Determinism rule: every pixel and every (tile, Gaussian) row is computed by exactly one task in a
+fixed order, and the reduction order (wave, then tile index) does not depend on scheduling, so
+the same inputs give bit-identical outputs and gradients for any number of threads.
 
 Threads: numba uses min(torch.get_num_threads(), NUMBA_NUM_THREADS) threads, so
 torch.set_num_threads() governs both backends. Threading layer: numba's `workqueue`, unless

@@ -28,9 +28,9 @@ LLVM can vectorise), then the pixels it reaches. Per-pixel state (transmittance,
 done flag) lives in small per-tile arrays. The backward pass recovers the transmittance back to
 front (T_k = T_{k+1} / (1 - alpha_k), float64) from the stored final float64 transmittance and
 the index of the last contributing Gaussian, and sums each Gaussian's gradient over the tile's
-pixels in row-major order into one float64 row per (tile, position). `reduce_rows` then adds rows
-into per-Gaussian gradients in row order (tile index, then depth rank): a fixed order, so results
-are bit-identical for any thread count.
+pixels in row-major order into one float64 row per (tile, position). `reduce_rows` then sums each
+Gaussian's rows in float64 in increasing tile order (one Gaussian per task) and adds the sum to its
+gradient: a fixed order, so results are bit-identical for any thread count.
 """
 from __future__ import annotations
 
