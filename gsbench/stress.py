@@ -673,9 +673,23 @@ def loss_cases() -> list[Case]:
 
     add("loss:ds", "edges of a constant prior", edges_case(np.full((24, 32), 5.0), full, True, "a constant prior"))
     add("loss:ds", "edges of an all-invalid prior", edges_case(prior, empty, True, "an all-invalid prior"))
-    nanp = prior.copy()
-    nanp[::2] = np.nan
-    add("loss:ds", "edges of a NaN/inf prior", edges_case(np.full((24, 32), np.nan), full, True, "an all-NaN prior"))
+    add("loss:ds", "edges of an all-NaN prior", edges_case(np.full((24, 32), np.nan), full, True, "an all-NaN prior"))
+
+    def nonfinite_blocks() -> CaseResult:
+        """NaN / inf blocks count as invalid: edges only at the real depth step, none along the blocks."""
+        yy, xx = np.mgrid[0:24, 0:32]
+        p = 1.0 + 0.01 * xx + 0.005 * yy + (xx >= 16) * 1.0      # noise-free ramp with one step at x = 16
+        p[:8, :8] = np.nan
+        p[16:, 4:12] = np.inf
+        e = depth_edges(p, full)
+        at_step = e & (np.abs(xx - 15.5) <= 3)
+        elsewhere = int((e & ~at_step).sum())
+        ok = e.dtype == bool and int(at_step.sum()) > 0 and elsewhere == 0
+        return CaseResult("loss:ds", "", finite_out=True, passed=ok,
+                          note=f"E_d: {int(at_step.sum())} edge pixels at the step, {elsewhere} elsewhere "
+                               f"(e.g. along the NaN/inf blocks; expected > 0 and 0)")
+
+    add("loss:ds", "edges of a prior with NaN/inf blocks", nonfinite_blocks)
     add("loss:ds", "edges of a prior with a step", edges_case(prior, full, False, "a prior with a depth step"))
     add("loss:ds", "edges of a 1e6 prior with a step", edges_case(prior * 1e6 + 1e6, full, False, "a 1e6 prior"))
     return cases

@@ -259,11 +259,11 @@ def depth_edges(values: np.ndarray, valid: np.ndarray, low: float = 50, high: fl
     if img is None:
         return np.zeros(np.asarray(values).shape, dtype=bool)
     e = cv2.Canny(img, float(low), float(high)) > 0
-    m = np.asarray(valid, dtype=bool)
+    m = np.asarray(valid, dtype=bool) & np.isfinite(np.asarray(values, dtype=np.float64))  # NaN/inf = invalid
     if not m.all():
         m = cv2.erode(m.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     e &= m
     if dilate > 0:
         e = cv2.dilate(e.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=int(dilate)) > 0
-        e &= np.asarray(valid, dtype=bool)
+        e &= np.asarray(valid, dtype=bool) & np.isfinite(np.asarray(values, dtype=np.float64))
     return e

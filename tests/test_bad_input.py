@@ -288,6 +288,17 @@ def test_output_not_writable_mask_scoring(scene, tmp_path, capsys):
     assert str(tmp_path / "a_file.txt") in msg and "Not a directory" in msg
 
 
+def test_output_not_writable_report(trained_run, tmp_path, capsys):
+    runs = tmp_path / "runs"
+    shutil.copytree(trained_run, runs / "r1")
+    assert main(["eval", str(runs / "r1"), "--no-progress"]) == 0
+    capsys.readouterr()
+    out = _blocked(tmp_path)
+    code, msg = cli_error(capsys, ["report", str(runs), "--out", str(out), "--no-progress"])
+    assert code == 1
+    assert str(tmp_path / "a_file.txt") in msg and "Not a directory" in msg
+
+
 # ------------------------------------------------------------------------------------ the real executable
 def test_console_script_exit_code_and_single_line(scene, tmp_path):
     s = copy_scene(scene, tmp_path)

@@ -161,3 +161,21 @@ def test_nonfinite_training_stops_with_status_and_keeps_last_good_checkpoint(wor
     ck = load_torch(run / "checkpoint.pt")                             # the last good checkpoint
     assert ck["step"] == 1
     assert all(bool(torch.isfinite(v).all()) for v in ck["params"].values())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("poison, expect", [
+    ("gaussiands.lambdas.tv=1e40", "non-finite loss at step 1"),              # inf in float32
+    ("train.lr.opacity=1e38", "optimiser step overflowed at step 1"),         # Adam: lr / (1 - beta1) > float32 max
+])
+def test_nonfinite_at_the_first_step_is_a_clear_status(workspace, poison, expect):
+    run = workspace / ("run_" + poison.split("=")[0].replace(".", "_"))
+    proc = subprocess.run(train_cmd(workspace / "scene", run, "train.iterations=20", "train.eval_every=0", poison),
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 1
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert lines[-1].startswith(f"gsbench train: error: {expect}") and "Traceback" not in proc.stderr
+    assert lines[-1].endswith("no checkpoint was written before this step")
+    st = read_json(run / "status.json")
+    assert st["state"] == "nonfinite" and expect in st["message"]
+    assert not (run / "model.pt").exists() and not (run / "checkpoint.pt").exists()
