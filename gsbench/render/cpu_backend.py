@@ -15,13 +15,13 @@ How it runs (kernels in gsbench/render/cpu_kernels.py):
    Gaussian, front to back, is composited into all channels of the tile's pixels in one pass; per
    pixel only the final transmittance and the index of the last contributing Gaussian are kept;
 3. backward: per tile, back to front, the transmittance is recovered as T_k = T_{k+1} / (1 - a_k);
-   each (tile, Gaussian) pair gets its own float64 gradient row (summed over the tile's pixels in
-   row-major order). Tiles are processed in waves (consecutive tiles whose rows fit in
-   ROW_BUDGET_BYTES, at least one tile); after each wave, every Gaussian's rows are summed in
-   float64 in increasing tile order and added once to its gradient (working dtype).
+   each (tile, Gaussian) pair gets its own gradient row: the sum over the tile's pixels (row-major
+   order) in float64, stored in the working dtype. Tiles are processed in waves (consecutive
+   tiles whose rows fit in ROW_BUDGET_BYTES, at least one tile); after each wave the rows are
+   added to the per-Gaussian gradients serially in row order (tile index, then depth rank).
 Determinism rule: every pixel and every (tile, Gaussian) row is computed by exactly one task in a
-fixed order, and the reduction order (wave, then tile index) does not depend on scheduling, so
-the same inputs give bit-identical outputs and gradients for any number of threads.
+fixed order, and the reduction is serial in a fixed order, so the same inputs give bit-identical
+outputs and gradients for any number of threads.
 
 Threads: numba uses min(torch.get_num_threads(), NUMBA_NUM_THREADS) threads, so
 torch.set_num_threads() governs both backends. Threading layer: numba's `workqueue`, unless
@@ -48,7 +48,7 @@ from gsbench.render.projection import Projected
 os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
 
-ROW_BUDGET_BYTES = 2**18         # gradient rows of one backward wave (float64; at least one tile)
+ROW_BUDGET_BYTES = 2 * 2**20     # gradient rows of one backward wave (working dtype; at least one tile)
 SKIP_MARGIN = 1e-3              # see cpu_kernels: exponent bound below which alpha < ALPHA_MIN surely
 
 
@@ -92,7 +92,7 @@ class _Rasterize(torch.autograd.Function):
         r = radii.detach()[order].to(dtype)
         x0, x1 = md[:, 0] - r[:, 0], md[:, 0] + r[:, 0]
         y0, y1 = md[:, 1] - r[:, 1], md[:, 1] + r[:, 1]
-        tile_off, ranks, rank_off, rank_pairs = K.bin_tiles(_numpy(x0), _numpy(x1), _numpy(y0), _numpy(y1),
+        tile_off, ranks = K.bin_tiles(_numpy(x0), _numpy(x1), _numpy(y0), _numpy(y1),
                                       width, height, tile_size)
         gp_np = _numpy(gp)
         ch_np = _numpy(channels.detach()[order])
@@ -110,7 +110,6 @@ class _Rasterize(torch.autograd.Function):
                              out, t_out, t64, last)
         ctx.kernel_args = (gp_np, ch_np, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last)
         ctx.order = order
-        ctx.rank_index = (rank_off, rank_pairs)
         ctx.m, ctx.n_ch = m, n_ch
         return torch.from_numpy(out), torch.from_numpy(t_out)
 
@@ -125,7 +124,7 @@ class _Rasterize(torch.autograd.Function):
         n_cols = K.G_CH + n_ch
         full_np = np.zeros((m, n_cols), dtype=gp_np.dtype)   # gradients in field order
         n_tiles = tile_off.size - 1
-        budget = max(1, ROW_BUDGET_BYTES // (8 * n_cols))
+        budget = max(1, ROW_BUDGET_BYTES // (gp_np.itemsize * n_cols))
         _set_threads()
         waves = []                # consecutive tiles whose rows fit in the budget (at least one tile)
         t_lo = 0
@@ -137,14 +136,13 @@ class _Rasterize(torch.autograd.Function):
                 waves.append((t_lo, t_hi))
             t_lo = t_hi
         max_rows = max((int(tile_off[b] - tile_off[a]) for a, b in waves), default=0)
-        rows = np.empty((max_rows, n_cols), dtype=np.float64)
-        rank_off, rank_pairs = ctx.rank_index
+        rows = np.empty((max_rows, n_cols), dtype=gp_np.dtype)
         order_np = ctx.order.numpy()
         for t_lo, t_hi in waves:
             with numba.parallel_chunksize(1):
                 K.raster_backward(gp_np, ch_np, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
                                   t64, last, g_out_np, g_t_np, t_lo, t_hi, rows)
-                K.reduce_rows(rank_off, rank_pairs, order_np, tile_off[t_lo], tile_off[t_hi], rows, full_np)
+            K.reduce_rows(tile_off, ranks, order_np, t_lo, t_hi, rows, full_np)
         del rows
         full = torch.from_numpy(full_np)
         need = ctx.needs_input_grad

@@ -23,14 +23,16 @@ Numerical mirror of the `torch` reference (gsbench/render/torch_backend.py):
   transmittance would be <= T_MIN;
 - the weight of Gaussian k is alpha_k * T_k in the working dtype; channel sums are float64.
 Loop order: per tile, Gaussians outer (front to back in the forward, back to front in the
-backward) and pixels inner, in two passes: the exponent for all pixels of the tile (a plain loop
-LLVM can vectorise), then the pixels it reaches. Per-pixel state (transmittance, colour behind,
-done flag) lives in small per-tile arrays. The backward pass recovers the transmittance back to
-front (T_k = T_{k+1} / (1 - alpha_k), float64) from the stored final float64 transmittance and
+backward) and pixels inner, row by row, restricted to the columns where the computed exponent can
+reach the skip bound (`_col_range`: a rigorous bound, so the decisions are those of evaluating
+every pixel). Per-pixel state (transmittance, colour behind, done flag) lives in small per-tile
+arrays. The backward pass recovers the transmittance back to front (T_k = T_{k+1} / (1 - alpha_k),
+float64) from the stored final float64 transmittance and
 the index of the last contributing Gaussian, and sums each Gaussian's gradient over the tile's
-pixels in row-major order into one float64 row per (tile, position). `reduce_rows` then sums each
-Gaussian's rows in float64 in increasing tile order (one Gaussian per task) and adds the sum to its
-gradient: a fixed order, so results are bit-identical for any thread count.
+pixels in row-major order in float64, stored as one row per (tile, position) in the working
+dtype. `reduce_rows` then adds the rows into the per-Gaussian gradients (working dtype) serially
+in row order (tile index, then depth rank): a fixed order, so results are bit-identical for any
+thread count.
 """
 from __future__ import annotations
 
@@ -71,9 +73,8 @@ def _tile_range(v0, v1, size, tile_size, n_tiles):
 def bin_tiles(x0, x1, y0, y1, width, height, tile_size):
     """Per-tile lists of Gaussian ranks (boxes given front to back).
 
-    Returns (tile_off (T+1,), ranks (P,), rank_off (M+1,), rank_pairs (P,)): the pairs of tile t
-    are ranks[tile_off[t]:tile_off[t+1]] (depth order); the pair indices of Gaussian g are
-    rank_pairs[rank_off[g]:rank_off[g+1]], in increasing tile order.
+    Returns (tile_off (T+1,), ranks (P,)): the Gaussians of tile t are
+    ranks[tile_off[t]:tile_off[t+1]], in depth order.
     """
     tiles_x = (width + tile_size - 1) // tile_size
     tiles_y = (height + tile_size - 1) // tile_size
@@ -81,7 +82,6 @@ def bin_tiles(x0, x1, y0, y1, width, height, tile_size):
     m = x0.size
     rng = np.empty((m, 4), np.int64)
     counts = np.zeros(n_tiles + 1, np.int64)
-    rank_off = np.zeros(m + 1, np.int64)
     for g in range(m):
         xl, xh = _tile_range(x0[g], x1[g], width, tile_size, tiles_x)
         yl, yh = _tile_range(y0[g], y1[g], height, tile_size, tiles_y)
@@ -89,49 +89,63 @@ def bin_tiles(x0, x1, y0, y1, width, height, tile_size):
         rng[g, 1] = xh
         rng[g, 2] = yl
         rng[g, 3] = yh
-        rank_off[g + 1] = rank_off[g] + max(0, xh - xl + 1) * max(0, yh - yl + 1)
         for ty in range(yl, yh + 1):
             for tx in range(xl, xh + 1):
                 counts[ty * tiles_x + tx + 1] += 1
     for t in range(n_tiles):
         counts[t + 1] += counts[t]
     ranks = np.empty(counts[n_tiles], np.int32)
-    rank_pairs = np.empty(counts[n_tiles], np.int64)
     cursor = counts[:n_tiles].copy()
     for g in range(m):
-        k = rank_off[g]
         for ty in range(rng[g, 2], rng[g, 3] + 1):
             for tx in range(rng[g, 0], rng[g, 1] + 1):
                 t = ty * tiles_x + tx
                 ranks[cursor[t]] = g
-                rank_pairs[k] = cursor[t]
-                k += 1
                 cursor[t] += 1
-    return counts, ranks, rank_off, rank_pairs
+    return counts, ranks
 
 
 @njit(inline="always", **_OPTS)
-def _tile_pixels(t, tiles_x, tile_size, width, height, pxc, pyc, qx, qy):
-    """Pixel-centre coordinates of tile t, row-major, into qx/qy. Returns (xa, ya, tile width, P)."""
+def _tile_box(t, tiles_x, tile_size, width, height):
+    """First pixel column and row, width and pixel count of tile t."""
     ty = t // tiles_x
     tx = t - ty * tiles_x
     xa = tx * tile_size
     ya = ty * tile_size
     tw = min(width, xa + tile_size) - xa
     th = min(height, ya + tile_size) - ya
-    for p in range(tw * th):
-        qx[p] = pxc[xa + p % tw]
-        qy[p] = pyc[ya + p // tw]
     return xa, ya, tw, tw * th
 
 
 @njit(inline="always", **_OPTS)
-def _powers(qx, qy, n_pix, mx, my, a, b, c, mhalf, pw):
-    """Exponent of one Gaussian at every pixel of a tile (a plain loop LLVM can vectorise)."""
-    for p in range(n_pix):
-        dx = qx[p] - mx
-        dy = qy[p] - my
-        pw[p] = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
+def _col_range(dy, mx, a, b, c, thr, xa, tw):
+    """Columns [i_lo, i_hi] of a tile row where the computed exponent can reach `thr` (i_lo > i_hi: none).
+
+    Exact, not a heuristic: along a row the exponent is the parabola
+    -a/2 (dx + b dy / a)^2 - dy^2 (c - b^2 / a) / 2, and the value computed in the working dtype
+    differs from it by less than 1e-5 (|a| dx^2 + |c| dy^2 + 2 |b dx dy|) (30x the float32
+    rounding bound of the five operations), so every pixel outside the returned columns (widened
+    by one pixel for the rounding of dx) has a computed exponent < thr and would be skipped anyway.
+    """
+    a64 = np.float64(a)
+    b64 = np.float64(b)
+    c64 = np.float64(c)
+    dy64 = np.float64(dy)
+    mx64 = np.float64(mx)
+    if not (a64 > 0.0):
+        return 0, tw - 1
+    dxm = max(abs(xa + 0.5 - mx64), abs(xa + tw - 0.5 - mx64)) + 1.0
+    err = 1e-5 * (abs(a64) * dxm * dxm + abs(c64) * dy64 * dy64 + 2.0 * abs(b64) * dxm * abs(dy64))
+    peak = -0.5 * dy64 * dy64 * (c64 - b64 * b64 / a64)
+    slack = peak + err - np.float64(thr)
+    slack += 1e-9 * (abs(peak) + abs(np.float64(thr)))
+    if not (slack >= 0.0):
+        return 1, 0
+    half = np.sqrt(2.0 * slack / a64) + 1.0
+    centre = mx64 - b64 * dy64 / a64 - 0.5 - xa      # column index where dx + b dy / a = 0
+    lo = min(max(centre - half, -1.0), tw + 1.0)
+    hi = min(max(centre + half, -1.0), tw + 1.0)
+    return max(0, int(np.ceil(lo))), min(tw - 1, int(np.floor(hi)))
 
 
 @njit(parallel=True, **_OPTS)
@@ -139,8 +153,8 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
                    out, t_out, t64_out, last_out):
     """Fused forward: all channels of every pixel, one tile per task.
 
-    Gaussians are visited front to back; for each, the exponent is computed for all pixels of the
-    tile at once (vectorised), then the pixels it reaches are composited. Writes out (H,W,C)
+    Gaussians are visited front to back; each is composited into the pixels of each tile row
+    that `_col_range` leaves (exactly those whose exponent can pass the rules). Writes out (H,W,C)
     channel sums, t_out (H,W) final transmittance (working dtype), t64_out (H,W) the same in
     float64 and last_out (H,W) = 1 + tile-list position of the last contributing Gaussian.
     """
@@ -152,12 +166,8 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
     amax = consts[K_AMAX]
     amin = consts[K_AMIN]
     tmin = consts[K_TMIN]
-    n_max = tile_size * tile_size
     for t in prange(n_tiles):
-        qx = np.empty(n_max, gp.dtype)
-        qy = np.empty(n_max, gp.dtype)
-        xa, ya, tw, n_pix = _tile_pixels(t, tiles_x, tile_size, width, height, pxc, pyc, qx, qy)
-        pw = np.empty(n_pix, gp.dtype)
+        xa, ya, tw, n_pix = _tile_box(t, tiles_x, tile_size, width, height)
         t64 = np.ones(n_pix, np.float64)
         t_w = np.empty(n_pix, gp.dtype)        # transmittance before the next Gaussian, working dtype
         rnd = np.empty(1, gp.dtype)             # rounds a float64 to the working dtype
@@ -169,31 +179,41 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
         n_live = n_pix
         start = tile_off[t]
         n = tile_off[t + 1] - start
+        th = n_pix // tw
         for j in range(n):
             g = ranks[start + j]
-            thr = gp[g, THR]
+            mx = gp[g, MX]
+            my = gp[g, MY]
+            a = gp[g, CA]
+            b = gp[g, CB]
+            c = gp[g, CC]
             op = gp[g, OP]
-            _powers(qx, qy, n_pix, gp[g, MX], gp[g, MY], gp[g, CA], gp[g, CB], gp[g, CC], mhalf, pw)
-            for p in range(n_pix):
-                power = pw[p]
-                if not (power <= zero) or power < thr or done[p]:
-                    continue
-                alpha = min(op * np.exp(power), amax)
-                if not (alpha >= amin):
-                    continue
-                t64_next = t64[p] * (one - alpha)
-                rnd[0] = t64_next
-                t_next = rnd[0]
-                if not (t_next > tmin):          # stop before this Gaussian
-                    done[p] = True
-                    n_live -= 1
-                    continue
-                w = alpha * t_w[p]
-                for k in range(n_ch):
-                    acc[p, k] += w * ch[g, k]
-                t64[p] = t64_next
-                t_w[p] = t_next
-                lastj[p] = j + 1
+            thr = gp[g, THR]
+            for row in range(th):
+                dy = pyc[ya + row] - my
+                i_lo, i_hi = _col_range(dy, mx, a, b, c, thr, xa, tw)
+                for i in range(i_lo, i_hi + 1):
+                    p = row * tw + i
+                    dx = pxc[xa + i] - mx
+                    power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
+                    if not (power <= zero) or power < thr or done[p]:
+                        continue
+                    alpha = min(op * np.exp(power), amax)
+                    if not (alpha >= amin):
+                        continue
+                    t64_next = t64[p] * (one - alpha)
+                    rnd[0] = t64_next
+                    t_next = rnd[0]
+                    if not (t_next > tmin):          # stop before this Gaussian
+                        done[p] = True
+                        n_live -= 1
+                        continue
+                    w = alpha * t_w[p]
+                    for k in range(n_ch):
+                        acc[p, k] += w * ch[g, k]
+                    t64[p] = t64_next
+                    t_w[p] = t_next
+                    lastj[p] = j + 1
             if n_live == 0:
                 break
         for p in range(n_pix):
@@ -210,7 +230,8 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
 def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
                     t64_in, last_in, g_out, g_t, t_lo, t_hi, rows):
     """Gradient rows of tiles [t_lo, t_hi): row tile_off[t] - tile_off[t_lo] + j is the gradient
-    contribution of the tile's j-th Gaussian, summed over the tile's pixels in row-major order.
+    contribution of the tile's j-th Gaussian, summed in float64 over the tile's pixels in
+    row-major order and stored in the dtype of `rows`.
 
     Gaussians are visited back to front; every pixel carries its transmittance (recovered as
     T_j = T_{j+1} / (1 - alpha_j) from the stored final value) and the colour behind it.
@@ -223,18 +244,14 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
     amin = consts[K_AMIN]
     base = tile_off[t_lo]
     n_cols = rows.shape[1]
-    n_max = tile_size * tile_size
-    for i in prange(t_hi - t_lo):
-        t = t_lo + i
+    for ti in prange(t_hi - t_lo):
+        t = t_lo + ti
         start = tile_off[t]
         n = tile_off[t + 1] - start
         r0 = start - base
         if n == 0:
             continue
-        qx = np.empty(n_max, gp.dtype)
-        qy = np.empty(n_max, gp.dtype)
-        xa, ya, tw, n_pix = _tile_pixels(t, tiles_x, tile_size, width, height, pxc, pyc, qx, qy)
-        pw = np.empty(n_pix, gp.dtype)
+        xa, ya, tw, n_pix = _tile_box(t, tiles_x, tile_size, width, height)
         tr = np.empty(n_pix, np.float64)
         t_fin = np.empty(n_pix, np.float64)
         g_tf = np.empty(n_pix, np.float64)
@@ -242,6 +259,7 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
         gc = np.empty((n_pix, n_ch), np.float64)
         s = np.zeros((n_pix, n_ch), np.float64)
         acc = np.empty(n_cols, np.float64)
+        th = n_pix // tw
         j_top = 0
         for p in range(n_pix):
             py = ya + p // tw
@@ -268,64 +286,59 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
             a64 = np.float64(a)
             b64 = np.float64(b)
             c64 = np.float64(c)
-            _powers(qx, qy, n_pix, mx, my, a, b, c, mhalf, pw)
             for k in range(n_cols):
                 acc[k] = 0.0
-            for p in range(n_pix):
-                if j >= last[p]:
-                    continue
-                power = pw[p]
-                if not (power <= zero) or power < thr:
-                    continue
-                G = np.exp(power)
-                raw = op * G
-                alpha = min(raw, amax)
-                if not (alpha >= amin):
-                    continue
-                al64 = np.float64(alpha)
-                om = np.float64(one - alpha)
-                tr[p] = tr[p] / om                 # transmittance before Gaussian j
-                w = al64 * tr[p]
-                d_alpha = 0.0
-                for k in range(n_ch):
-                    cv = np.float64(ch[g, k])
-                    acc[G_CH + k] += w * gc[p, k]
-                    d_alpha += gc[p, k] * (cv - s[p, k])
-                    s[p, k] = al64 * cv + om * s[p, k]
-                d_alpha = d_alpha * tr[p] - g_tf[p] * t_fin[p] / om
-                if raw <= amax:                    # no gradient through the clamp
-                    d_pow = d_alpha * np.float64(raw)
-                    dx = np.float64(qx[p] - mx)
-                    dy = np.float64(qy[p] - my)
-                    acc[G_OP] += d_alpha * np.float64(G)
-                    acc[G_MX] += d_pow * (a64 * dx + b64 * dy)
-                    acc[G_MY] += d_pow * (b64 * dx + c64 * dy)
-                    acc[G_CA] += d_pow * (-0.5 * dx * dx)
-                    acc[G_CB] += d_pow * (-dx * dy)
-                    acc[G_CC] += d_pow * (-0.5 * dy * dy)
+            for row in range(th):
+                dy = pyc[ya + row] - my
+                i_lo, i_hi = _col_range(dy, mx, a, b, c, thr, xa, tw)
+                for i in range(i_lo, i_hi + 1):
+                    p = row * tw + i
+                    if j >= last[p]:
+                        continue
+                    dx = pxc[xa + i] - mx
+                    power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
+                    if not (power <= zero) or power < thr:
+                        continue
+                    G = np.exp(power)
+                    raw = op * G
+                    alpha = min(raw, amax)
+                    if not (alpha >= amin):
+                        continue
+                    al64 = np.float64(alpha)
+                    om = np.float64(one - alpha)
+                    tr[p] = tr[p] / om                 # transmittance before Gaussian j
+                    w = al64 * tr[p]
+                    d_alpha = 0.0
+                    for k in range(n_ch):
+                        cv = np.float64(ch[g, k])
+                        acc[G_CH + k] += w * gc[p, k]
+                        d_alpha += gc[p, k] * (cv - s[p, k])
+                        s[p, k] = al64 * cv + om * s[p, k]
+                    d_alpha = d_alpha * tr[p] - g_tf[p] * t_fin[p] / om
+                    if raw <= amax:                    # no gradient through the clamp
+                        d_pow = d_alpha * np.float64(raw)
+                        dx64 = np.float64(dx)
+                        dy64 = np.float64(dy)
+                        acc[G_OP] += d_alpha * np.float64(G)
+                        acc[G_MX] += d_pow * (a64 * dx64 + b64 * dy64)
+                        acc[G_MY] += d_pow * (b64 * dx64 + c64 * dy64)
+                        acc[G_CA] += d_pow * (-0.5 * dx64 * dx64)
+                        acc[G_CB] += d_pow * (-dx64 * dy64)
+                        acc[G_CC] += d_pow * (-0.5 * dy64 * dy64)
             for k in range(n_cols):
                 rows[r0 + j, k] = acc[k]
 
 
-@njit(parallel=True, **_OPTS)
-def reduce_rows(rank_off, rank_pairs, order, p_lo, p_hi, rows, out):
-    """out[order[g]] += sum of Gaussian g's rows among pairs [p_lo, p_hi), in tile order.
+@njit(**_OPTS)
+def reduce_rows(tile_off, ranks, order, t_lo, t_hi, rows, out):
+    """out[order[rank]] += rows, in row order (tile index, then depth rank): a fixed order.
 
-    One Gaussian per task; the sum is float64 in increasing tile order and is added to `out`
-    (the working dtype, field order) once per wave: a fixed order for any thread count.
+    Serial on purpose: it is O(pairs x columns), a small fraction of the rasterization, and the
+    order of the additions must not depend on scheduling.
     """
+    base = tile_off[t_lo]
     n_cols = rows.shape[1]
-    for g in prange(rank_off.size - 1):
-        k0 = rank_off[g]
-        k1 = rank_off[g + 1]
-        if k0 == k1 or rank_pairs[k1 - 1] < p_lo or rank_pairs[k0] >= p_hi:
-            continue
-        o = order[g]
-        for c in range(n_cols):
-            acc = 0.0
-            for k in range(k0, k1):
-                q = rank_pairs[k]
-                if q >= p_lo and q < p_hi:
-                    acc += rows[q - p_lo, c]
-            out[o, c] += acc
-
+    for r in range(tile_off[t_hi] - base):
+        o = order[ranks[base + r]]
+        for k in range(n_cols):
+            out[o, k] += rows[r, k]
