@@ -11,14 +11,16 @@ PYTEST_ARGS ?=
 
 $(VPY):
 	$(PY) -m venv $(VENV)
-	$(VPY) -m pip install --quiet --upgrade pip
 
 # torch: use the CPU build of 2.13.0 from this machine's disk unless a torch is already importable.
 venv: $(VPY)
-	@$(VPY) -c "import torch" 2>/dev/null || $(VPY) -m pip install --quiet torch==2.13.0
+	@$(VPY) -c "import torch" 2>/dev/null || (echo "installing torch==2.13.0 (CPU)"; \
+	  $(VPY) -m pip install --quiet torch==2.13.0 > $(VENV)/torch-install.log 2>&1 || (cat $(VENV)/torch-install.log; exit 1))
 
+# pip's build warnings go to .venv/install.log; it is printed only when the install fails.
 install: venv
-	$(VPY) -m pip install --quiet -e ".[test]"
+	@echo "installing gsbench[test] into $(VENV) (log: $(VENV)/install.log)"
+	@$(VPY) -m pip install --quiet -e ".[test]" > $(VENV)/install.log 2>&1 || (cat $(VENV)/install.log; exit 1)
 
 demo: install
 	bash scripts/demo.sh $(VENV) $(DEMO)

@@ -270,11 +270,12 @@ def _features(method, cam, mode: str):
     return None if f is None else _np(f)
 
 
-def _seg_3dovs(method, scene, test_ids, cams, config, mode, metrics, per_view, metric_impl, skipped):
+def _seg_3dovs(method, scene, test_ids, cams, config, mode, metrics, per_view, metric_impl, skipped,
+               query_modes: tuple = QUERY_MODES):
     from gsbench.metrics import ovs3d
     ratio = float((config.get("eval") or {}).get("boundary_dilation_ratio", 0.02))
     classes = list(scene.class_names)
-    for qm in QUERY_MODES:
+    for qm in query_modes:
         text = _text(method, classes, qm)
         if text is None:
             skipped[f"3dovs_{qm}"] = f"method {config.get('method')} has no semantic field"
@@ -313,6 +314,26 @@ def _seg_3dovs(method, scene, test_ids, cams, config, mode, metrics, per_view, m
         metrics.setdefault(name, None)
 
 
+def segmentation_metrics(method, scene, view_ids: list[int], cams: list, config: dict) -> tuple[dict, dict]:
+    """(metrics, skipped) of the segmentation protocols the scene supports, on the given views and cameras,
+    in the configured query mode only: the same code as `evaluate_run`, for the trainer's periodic
+    evaluation (metric names as in results.json: miou_3dovs, mbiou_3dovs, pixel_acc_3dovs, miou_lerf,
+    loc_acc_lerf; null where not computable, with the reason in skipped)."""
+    import torch
+    mode = (config.get("query") or {}).get("mode", "encode")
+    if mode not in QUERY_MODES:
+        raise ValueError(f"query.mode must be one of {', '.join(QUERY_MODES)}, got {mode!r}")
+    metrics: dict[str, Any] = {}
+    skipped: dict[str, str] = {}
+    protocols, pskip = resolve_protocols(scene, "auto")
+    skipped.update({f"segmentation_{k}": v for k, v in pskip.items()})
+    with torch.no_grad():
+        for p in protocols:
+            fn = _seg_3dovs if p == "3dovs" else _seg_lerf
+            fn(method, scene, list(view_ids), list(cams), config, mode, metrics, {}, {}, skipped, query_modes=(mode,))
+    return metrics, skipped
+
+
 def _class_masks(scene, i: int, classes: list[str]) -> Optional[dict]:
     """{class: bool mask} of view i (the per-class masks keep pixels two classes claim), or None."""
     loader = getattr(scene, "class_masks_loader", None)
@@ -326,10 +347,11 @@ def _class_masks(scene, i: int, classes: list[str]) -> Optional[dict]:
     return {c: gt == k for k, c in enumerate(classes)}
 
 
-def _seg_lerf(method, scene, test_ids, cams, config, mode, metrics, per_view, metric_impl, skipped):
+def _seg_lerf(method, scene, test_ids, cams, config, mode, metrics, per_view, metric_impl, skipped,
+              query_modes: tuple = QUERY_MODES):
     from gsbench.metrics import lerf
     unlabeled = [scene.cameras[i].name or str(i) for i in test_ids if scene.gt_labels(i) is None]
-    for qm in QUERY_MODES:
+    for qm in query_modes:
         neg = _text(method, list(lerf.CANONICAL_NEGATIVES), qm)
         if neg is None:
             skipped[f"lerf_{qm}"] = f"method {config.get('method')} has no semantic field"

@@ -48,17 +48,46 @@ def fit_priors(scene, config: dict, run_dir: Path, view_ids: list[int], size: tu
                           per_frame_masks=per_frame, seed=int(config["seed"]), progress=progress)
 
 
+def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Callable[[GaussianField], dict]]:
+    """Periodic segmentation mIoU of a semantic method on the eval views (training resolution), with
+    gsbench.evaluate's code in the configured query mode: {"miou_3dovs": .., "miou_lerf": ..} for the
+    protocols the scene supports. Returns {} while the field has no latents or the method no
+    autoencoder yet (e.g. twostage's rgb phase); None when the scene has no segmentation GT at all."""
+    if method is None or not views.eval_cameras or not (scene.has_semantics or scene.has_labels):
+        return None
+    import copy
+
+    from gsbench.evaluate import segmentation_metrics
+    ids = sorted(views.eval_cameras)
+    cams = [views.eval_cameras[i] for i in ids]
+
+    def _sem(fld: GaussianField) -> dict:
+        if fld.features is None or method.autoencoder is None:
+            return {}
+        method.feature_provider()          # build (and cache) the text encoder once, on the real method
+        m = copy.copy(method)
+        m.field = fld
+        metrics, _ = segmentation_metrics(m, scene, ids, cams, config)
+        out = {k: float(metrics[k]) for k in ("miou_3dovs", "miou_lerf") if metrics.get(k) is not None}
+        if out:
+            out["query_mode"] = (config.get("query") or {}).get("mode", "encode")
+        return out
+
+    return _sem
+
+
 def run_trainer(config: dict, views: TrainViews, scene, field0: GaussianField, run_dir: Path,
                 loss_fn: Callable, *, phase: str, backend: str, progress: bool, resume: Optional[dict],
                 iterations: Optional[int] = None, trainable: Optional[set] = None, densify: bool = True,
-                extra_state: Optional[Callable[[], dict]] = None) -> GaussianField:
-    """Run one trainer phase, resuming when `resume` is a checkpoint of that phase."""
+                extra_state: Optional[Callable[[], dict]] = None, method=None) -> GaussianField:
+    """Run one trainer phase, resuming when `resume` is a checkpoint of that phase. With `method` (a
+    semantic Method whose autoencoder is set), the periodic evaluation also logs segmentation mIoU."""
     tr = Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase=phase,
                  iterations=iterations, trainable=trainable, densify=densify, backend=backend,
                  seed=int(config["seed"]), extra_state=extra_state)
-    tr.eval_fn = periodic_eval(views, backend, tr.background)
+    tr.eval_fn = periodic_eval(views, backend, tr.background, extra=semantic_eval(method, scene, views, config))
     st = resume if (resume is not None and resume.get("phase") == phase) else None
     return tr.run(progress=progress, resume_state=st)
 
 
-__all__ = ["uses", "resolve_render_backend", "fit_priors", "run_trainer", "LossResult", "cache_dir_for"]
+__all__ = ["uses", "resolve_render_backend", "fit_priors", "run_trainer", "semantic_eval", "LossResult", "cache_dir_for"]

@@ -289,8 +289,10 @@ class Trainer:
         return self.field
 
 
-def periodic_eval(views: TrainViews, backend: str, background: torch.Tensor) -> Callable[[GaussianField], dict]:
-    """PSNR / SSIM (gsbench.metrics) on the held-out views listed in `views.eval_cameras`."""
+def periodic_eval(views: TrainViews, backend: str, background: torch.Tensor,
+                  extra: Optional[Callable[[GaussianField], dict]] = None) -> Callable[[GaussianField], dict]:
+    """PSNR / SSIM (gsbench.metrics) on the held-out views listed in `views.eval_cameras`, plus what
+    `extra(field)` returns (e.g. the segmentation mIoU of a semantic method, see methods.common)."""
 
     def _eval(fld: GaussianField) -> dict:
         if not views.eval_cameras:
@@ -304,7 +306,10 @@ def periodic_eval(views: TrainViews, backend: str, background: torch.Tensor) -> 
                 gt = views.eval_images[i].cpu().numpy()
                 ps.append(psnr(pred, gt))
                 ss.append(ssim(pred, gt))
-        return {"psnr": float(np.mean(ps)), "ssim": float(np.mean(ss)), "n_views": len(ps)}
+        res = {"psnr": float(np.mean(ps)), "ssim": float(np.mean(ss)), "n_views": len(ps)}
+        if extra is not None:
+            res.update(extra(fld))
+        return res
 
     return _eval
 

@@ -77,5 +77,6 @@ class TwoStage(Method):
                                  resume=ckpt if (ckpt or {}).get("phase") == "semantic" else None,
                                  iterations=int(config["twostage"]["semantic_iterations"]),
                                  trainable={"features"}, densify=False,
-                                 extra_state=lambda: {"autoencoder": self.autoencoder.state_dict()})
+                                 extra_state=lambda: {"autoencoder": self.autoencoder.state_dict()},
+                                 method=self)
         self.info["n_gaussians"] = self.field.num

@@ -15,11 +15,16 @@ step() {
   if [ $rc -eq 3 ]; then echo "(stage not built yet: stopping the demo here; no result is faked)"; exit 0; fi
   if [ $rc -ne 0 ]; then echo "demo failed at: gsbench $*" >&2; exit $rc; fi
 }
-step make-scene --preset tabletop-small --out "$OUT/scene"
+# Re-running the demo reuses the scene and the finished runs (train skips a run whose status is done).
+if [ -f "$OUT/scene/gsbench_scene.json" ]; then
+  echo "==> reusing the scene in $OUT/scene"
+else
+  step make-scene --preset tabletop-small --out "$OUT/scene"
+fi
 for m in gaussiands vanilla twostage; do
   step train --method "$m" --scene "$OUT/scene" --preset cpu-small --out "$OUT/runs/$m"
   step eval "$OUT/runs/$m"
 done
 step collect "$OUT/runs"
 step report "$OUT/runs" --out "$OUT/report"
-echo "Report: $OUT/report/index.html"
+

@@ -4,6 +4,7 @@
 # (a ~5.5 GB CUDA torch build), so they run in their own venv, never in the main .venv.
 #
 #   bash scripts/test_models.sh [extra pytest args]
+#   bash scripts/test_models.sh --setup-only      (create / update the venv, run nothing)
 #
 # GSBENCH_MODELS_VENV  venv folder (default /tmp/gsbench-venv-models: outside the work tree, so
 #                      that it can never be committed). Created on the first run, reused after.
@@ -24,11 +25,15 @@ if ! "$VPY" -c "import torch, torchvision" 2>/dev/null; then
 fi
 # SAM2's optional CUDA extension is not built (CPU-only tests; sam2 runs without it).
 export SAM2_BUILD_CUDA=0
-echo "test_models: installing gsbench[models,test]"
-"$VPY" -m pip install --quiet -e ".[models,test]"
+echo "test_models: installing gsbench[models,lpips,test]"
+"$VPY" -m pip install --quiet -e ".[models,lpips,test]"
+if [ "${1:-}" = "--setup-only" ]; then
+  echo "test_models: venv ready at $VENV"
+  exit 0
+fi
 export HF_HUB_OFFLINE=1 TRANSFORMERS_OFFLINE=1
 set +e
-"$VPY" -m pytest -q tests/models "$@"
+"$VPY" -m pytest -q tests/models tests/test_metrics_lpips_reference.py "$@"
 rc=$?
 set -e
 # exit 5 = no tests collected: that is a failure here (the models tests must run in this venv).

@@ -70,6 +70,16 @@ def assert_outputs_close(a, b, atol: float) -> None:
         assert err <= atol, f"{name}: max abs diff {err:.3g} > {atol}"
 
 
+def _out_err(a, b) -> float:
+    """max abs difference over rgb, depth, alpha, features."""
+    errs = [0.0]
+    for name in ("rgb", "depth", "alpha", "features"):
+        x, y = getattr(a, name), getattr(b, name)
+        if y is not None and y.numel():
+            errs.append((x.detach().double() - y.detach().double()).abs().max().item())
+    return max(errs)
+
+
 def rel_err(x: torch.Tensor, y: torch.Tensor) -> float:
     """max |x - y| / max |y| (0 when both are all zero, inf when only y is)."""
     ref = y.double().abs().max().item() if y.numel() else 0.0
@@ -228,16 +238,26 @@ def test_cpu_matches_torch_extreme_float32(name):
     field, cam = EXTREME[name]
     oc, gc = run(field, cam, "cpu", background=[0.3, 0.3, 0.3])
     ot, gt = run(field, cam, "torch", background=[0.3, 0.3, 0.3])
-    assert_outputs_close(oc, ot, 1e-5)
+    o64, g64 = run(field, cam, "torch", dtype=torch.float64, background=[0.3, 0.3, 0.3])
+    # Outputs within 1e-5, or where the float32 reference itself is further than that from float64
+    # (aspect 1e4 needles: a float32 conic of a needle carries a relative error of ~1e-4 in the
+    # exponent, in either backend), within twice the reference's own float32 error; the cpu
+    # backend (float64 projection, rounded) must then be at least as close to float64 as the reference.
+    ref_err = max(_out_err(ot, o64), 0.0)
+    assert_outputs_close(oc, ot, max(1e-5, 2.0 * ref_err))
+    if ref_err > 1e-5:
+        assert _out_err(oc, o64) <= ref_err
     # Tolerance 1e-4, or twice the float32 reference's own error against float64 where the
-    # (shared, autograd) projection backward is ill-conditioned in float32 (aspect 1e4 needles:
-    # rasterizer-level gradients agree to 1e-6 there, see the test below).
-    _, g64 = run(field, cam, "torch", dtype=torch.float64, background=[0.3, 0.3, 0.3])
+    # projection is ill-conditioned in float32 (aspect 1e4 needles).
+    if name == "empty":
+        # the reference leaves parameters that never enter its graph without a gradient (None);
+        # the fused cpu path gives every parameter (and means2d) an exact zero gradient
+        assert oc.info["n_visible"] == 0
+        assert torch.all(oc.alpha == 0)
+        assert all(g is not None and torch.all(g == 0) for g in gc.values())
+        return
     tol = {k: max(1e-4, 2.0 * rel_err(gt[k], g64[k])) for k in gt if gt[k] is not None}
     assert_grads_close(gc, gt, tol)
-    if name == "empty":
-        assert oc.info["n_visible"] == 0
-        assert torch.all(oc.alpha == 0) and torch.all(gc["means"] == 0)
 
 
 def _raster_grads(fn, proj, channels, width, height, seed=3):

@@ -58,16 +58,9 @@ def _rasterizer(name: str) -> Callable:
     raise ValueError(name)
 
 
-def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
-           background: Optional[torch.Tensor] = None) -> RenderOutput:
-    """Render RGB, depth, features and alpha of `field` seen from `camera`."""
+def _render_projected(field: GaussianField, camera: Camera, name: str):
+    """Shared torch projection + the named rasterizer: (out, t_final, means2d, radii, n_visible)."""
     device, dtype = field.means.device, field.means.dtype
-    name = resolve_backend(backend, device)
-    if name == "gsplat":
-        from gsbench.render.gsplat_backend import render_gsplat
-        return render_gsplat(field, camera, background=background)
-    if device.type == "cpu":
-        torch.set_flush_denormal(True)
     proj: Projected = project_gaussians(field, camera)
     cam_center = torch.as_tensor(camera.center, device=device, dtype=dtype)
     rgb_g = field.subset(proj.ids).rgb(cam_center)   # colours of visible Gaussians only (NaN-free grads)
@@ -82,6 +75,26 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
         out, t_final = out + channels[:0].sum(), t_final + proj.opacities[:0].sum()
     if torch.is_grad_enabled() and proj.means2d.requires_grad and proj.ids.numel() == 0:
         out = out + proj.means2d[:0].sum()   # so out.means2d.grad is zeros after backward, not None
+    return out, t_final, proj.means2d, proj.radii, int(proj.ids.numel())
+
+
+def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
+           background: Optional[torch.Tensor] = None) -> RenderOutput:
+    """Render RGB, depth, features and alpha of `field` seen from `camera`."""
+    device, dtype = field.means.device, field.means.dtype
+    name = resolve_backend(backend, device)
+    if name == "gsplat":
+        from gsbench.render.gsplat_backend import render_gsplat
+        return render_gsplat(field, camera, background=background)
+    if device.type == "cpu":
+        torch.set_flush_denormal(True)
+    if name == "cpu":
+        # fused numba projection + rasterization (gsbench/render/cpu_backend.py); means2d is a leaf
+        # whose .grad the backward fills
+        from gsbench.render.cpu_backend import render_fused_cpu
+        out, t_final, means2d, radii, n_visible = render_fused_cpu(field, camera)
+    else:
+        out, t_final, means2d, radii, n_visible = _render_projected(field, camera, name)
     rgb = out[..., :3]
     if background is not None:
         bg = torch.as_tensor(background, device=device, dtype=dtype)
@@ -91,7 +104,7 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
         rgb = rgb + t_final[..., None] * bg
     feats = out[..., 4:] if field.features is not None else None
     return RenderOutput(rgb=rgb, depth=out[..., 3], features=feats, alpha=1.0 - t_final, backend=name,
-                        means2d=proj.means2d, radii=proj.radii,
-                        info={"n_gaussians": field.num, "n_visible": int(proj.ids.numel()),
+                        means2d=means2d, radii=radii,
+                        info={"n_gaussians": field.num, "n_visible": n_visible,
                               "width": camera.width, "height": camera.height,
                               "dtype": str(dtype).replace("torch.", ""), "device": str(device)})

@@ -39,9 +39,12 @@ import numba
 import numpy as np
 import torch
 
+from gsbench.gaussians import GaussianField
 from gsbench.render import cpu_kernels as K
+from gsbench.render import cpu_projection as P
 from gsbench.render import rules
 from gsbench.render.projection import Projected
+from gsbench.scene import Camera
 
 # Must precede the first parallel kernel launch. Set in the environment too: numba re-reads its
 # configuration from the environment whenever os.environ changes, which would undo a plain assignment.
@@ -71,80 +74,92 @@ def _numpy(t: torch.Tensor) -> np.ndarray:
     return np.ascontiguousarray(t.detach().cpu().numpy())
 
 
+def _numpy64(t: torch.Tensor) -> np.ndarray:
+    return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=np.float64)
+
+
+def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
+    """Sort, bin and composite (numpy arrays in the working dtype; rows = visible Gaussians).
+
+    Returns (out (H,W,C), t_final (H,W), state for `_raster_backward`).
+    """
+    np_dtype = ch.dtype.type
+    m, n_ch = ch.shape
+    order = np.argsort(z, kind="stable")
+    md = md[order]
+    op = op[order]
+    gp = np.zeros((m, K.NPARAM), dtype=np_dtype)
+    gp[:, K.MX:K.MY + 1] = md
+    gp[:, K.CA:K.CC + 1] = conics[order]
+    gp[:, K.OP] = op
+    op64 = np.maximum(op.astype(np.float64), rules.ALPHA_MIN)
+    gp[:, K.THR] = (np.log(rules.ALPHA_MIN / op64) - SKIP_MARGIN).astype(np_dtype)
+    # screen boxes exactly as the reference computes them (same dtype, same operations)
+    r = radii[order].astype(np_dtype)
+    x0, x1 = md[:, 0] - r[:, 0], md[:, 0] + r[:, 0]
+    y0, y1 = md[:, 1] - r[:, 1], md[:, 1] + r[:, 1]
+    tile_off, ranks = K.bin_tiles(x0, x1, y0, y1, width, height, tile_size)
+    ch_s = np.ascontiguousarray(ch[order])
+    pxc = np.arange(width, dtype=np_dtype) + np_dtype(0.5)
+    pyc = np.arange(height, dtype=np_dtype) + np_dtype(0.5)
+    consts = _consts(np_dtype)
+    tiles_x = (width + tile_size - 1) // tile_size
+    out = np.empty((height, width, n_ch), dtype=np_dtype)
+    t_out = np.empty((height, width), dtype=np_dtype)
+    t64 = np.empty((height, width), dtype=np.float64)
+    last = np.empty((height, width), dtype=np.int32)
+    _set_threads()
+    with numba.parallel_chunksize(1):
+        K.raster_forward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
+                         out, t_out, t64, last)
+    state = (gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order)
+    return out, t_out, state
+
+
+def _raster_backward(state, g_out_np, g_t_np) -> np.ndarray:
+    """Gradient rows (M, G_CH + C) in the caller's row order (working dtype)."""
+    gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order = state
+    m, n_ch = ch_s.shape
+    n_cols = K.G_CH + n_ch
+    full = np.zeros((m, n_cols), dtype=gp.dtype)
+    n_tiles = tile_off.size - 1
+    budget = max(1, ROW_BUDGET_BYTES // (gp.itemsize * n_cols))
+    _set_threads()
+    waves = []                # consecutive tiles whose rows fit in the budget (at least one tile)
+    t_lo = 0
+    while t_lo < n_tiles:
+        t_hi = t_lo + 1
+        while t_hi < n_tiles and tile_off[t_hi + 1] - tile_off[t_lo] <= budget:
+            t_hi += 1
+        if tile_off[t_hi] > tile_off[t_lo]:
+            waves.append((t_lo, t_hi))
+        t_lo = t_hi
+    max_rows = max((int(tile_off[b] - tile_off[a]) for a, b in waves), default=0)
+    rows = np.empty((max_rows, n_cols), dtype=gp.dtype)
+    for t_lo, t_hi in waves:
+        with numba.parallel_chunksize(1):
+            K.raster_backward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
+                              t64, last, g_out_np, g_t_np, t_lo, t_hi, rows)
+        K.reduce_rows(tile_off, ranks, order, t_lo, t_hi, rows, full)
+    return full
+
+
 class _Rasterize(torch.autograd.Function):
     """(means2d (M,2), conics (M,3), opacities (M,), channels (M,C)) -> (out (H,W,C), T (H,W))."""
 
     @staticmethod
     def forward(ctx, means2d, conics, opacities, channels, radii, depths, width, height, tile_size):
-        dtype = channels.dtype
-        np_dtype = np.float32 if dtype == torch.float32 else np.float64
-        m, n_ch = channels.shape
-        order = torch.sort(depths.detach(), stable=True).indices
-        md = means2d.detach()[order]
-        op = opacities.detach()[order]
-        gp = torch.zeros(m, K.NPARAM, dtype=dtype)
-        gp[:, K.MX:K.MY + 1] = md
-        gp[:, K.CA:K.CC + 1] = conics.detach()[order]
-        gp[:, K.OP] = op
-        op64 = op.to(torch.float64).clamp(min=rules.ALPHA_MIN)
-        gp[:, K.THR] = (torch.log(rules.ALPHA_MIN / op64) - SKIP_MARGIN).to(dtype)
-        # screen boxes exactly as the reference computes them (same dtype, same operations)
-        r = radii.detach()[order].to(dtype)
-        x0, x1 = md[:, 0] - r[:, 0], md[:, 0] + r[:, 0]
-        y0, y1 = md[:, 1] - r[:, 1], md[:, 1] + r[:, 1]
-        tile_off, ranks = K.bin_tiles(_numpy(x0), _numpy(x1), _numpy(y0), _numpy(y1),
-                                      width, height, tile_size)
-        gp_np = _numpy(gp)
-        ch_np = _numpy(channels.detach()[order])
-        pxc = np.arange(width, dtype=np_dtype) + np_dtype(0.5)
-        pyc = np.arange(height, dtype=np_dtype) + np_dtype(0.5)
-        consts = _consts(np_dtype)
-        tiles_x = (width + tile_size - 1) // tile_size
-        out = np.empty((height, width, n_ch), dtype=np_dtype)
-        t_out = np.empty((height, width), dtype=np_dtype)
-        t64 = np.empty((height, width), dtype=np.float64)
-        last = np.empty((height, width), dtype=np.int32)
-        _set_threads()
-        with numba.parallel_chunksize(1):
-            K.raster_forward(gp_np, ch_np, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                             out, t_out, t64, last)
-        ctx.kernel_args = (gp_np, ch_np, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last)
-        ctx.order = order
-        ctx.m, ctx.n_ch = m, n_ch
+        out, t_out, state = _raster_forward(_numpy(means2d), _numpy(conics), _numpy(opacities),
+                                            _numpy(channels), _numpy(radii), _numpy(depths),
+                                            width, height, tile_size)
+        ctx.state = state
         return torch.from_numpy(out), torch.from_numpy(t_out)
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, g_out, g_t):
-        gp_np, ch_np, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last = ctx.kernel_args
-        m, n_ch = ctx.m, ctx.n_ch
-        dtype = torch.float32 if gp_np.dtype == np.float32 else torch.float64
-        g_out_np = _numpy(g_out.to(dtype))
-        g_t_np = _numpy(g_t.to(dtype))
-        n_cols = K.G_CH + n_ch
-        full_np = np.zeros((m, n_cols), dtype=gp_np.dtype)   # gradients in field order
-        n_tiles = tile_off.size - 1
-        budget = max(1, ROW_BUDGET_BYTES // (gp_np.itemsize * n_cols))
-        _set_threads()
-        waves = []                # consecutive tiles whose rows fit in the budget (at least one tile)
-        t_lo = 0
-        while t_lo < n_tiles:
-            t_hi = t_lo + 1
-            while t_hi < n_tiles and tile_off[t_hi + 1] - tile_off[t_lo] <= budget:
-                t_hi += 1
-            if tile_off[t_hi] > tile_off[t_lo]:
-                waves.append((t_lo, t_hi))
-            t_lo = t_hi
-        max_rows = max((int(tile_off[b] - tile_off[a]) for a, b in waves), default=0)
-        rows = np.empty((max_rows, n_cols), dtype=gp_np.dtype)
-        order_np = ctx.order.numpy()
-        for t_lo, t_hi in waves:
-            with numba.parallel_chunksize(1):
-                K.raster_backward(gp_np, ch_np, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                                  t64, last, g_out_np, g_t_np, t_lo, t_hi, rows)
-            K.reduce_rows(tile_off, ranks, order_np, t_lo, t_hi, rows, full_np)
-        del rows
-        full = torch.from_numpy(full_np)
+        dtype = torch.from_numpy(ctx.state[0][:0]).dtype
+        full = torch.from_numpy(_raster_backward(ctx.state, _numpy(g_out.to(dtype)), _numpy(g_t.to(dtype))))
         need = ctx.needs_input_grad
         return (full[:, K.G_MX:K.G_MY + 1] if need[0] else None,
                 full[:, K.G_CA:K.G_CC + 1] if need[1] else None,
@@ -186,3 +201,139 @@ def rasterize_cpu(proj: Projected, channels: torch.Tensor, width: int, height: i
         raise ValueError(f"rasterize_cpu: image {width}x{height} is too large")
     radii = proj.radii[proj.ids]
     return _Rasterize.apply(means2d, conics, opacities, channels, radii, proj.depths, width, height, tile_size)
+
+
+# ---------------------------------------------------------------------------- fused render
+class _Projection:
+    """Result of the numba projection of a whole field (float64), shared by forward and backward."""
+
+    def __init__(self, field: GaussianField, camera: Camera):
+        dtype = field.means.dtype
+        self.np_dtype = np.float32 if dtype == torch.float32 else np.float64
+        self.means = _numpy64(field.means)
+        self.log_scales = _numpy64(field.log_scales)
+        self.quats = _numpy64(field.quats)
+        self.logits = _numpy64(field.opacity_logits)
+        w2c = np.asarray(camera.world_to_camera, dtype=np.float64)
+        self.cam = P.camera_array(w2c[:3, :3], w2c[:3, 3], np.asarray(camera.K, np.float64),
+                                  camera.width, camera.height)
+        self.width, self.height = int(camera.width), int(camera.height)
+        n = self.means.shape[0]
+        ok = np.empty(n, np.bool_)
+        params = np.empty((n, P.NPROJ), np.float64)
+        self.radii = np.empty((n, 2), np.int64)
+        _set_threads()
+        P.project_forward(self.means, self.log_scales, self.quats, self.logits, self.cam,
+                          self.width, self.height, self.np_dtype == np.float32, ok, params, self.radii)
+        self.ids = np.flatnonzero(ok)
+        self.params = params[self.ids].astype(self.np_dtype)     # (M, NPROJ) working dtype
+
+
+class _FusedRender(torch.autograd.Function):
+    """(means, log_scales, quats, opacity_logits, rgb of the visible Gaussians (M,3), features (N,d)
+    or None, means2d probe (N,2)) -> (out (H,W,4+d): rgb, depth, features; T (H,W)).
+
+    The projection was run by the caller (`_Projection`, passed as `proj`) because the visible set
+    is needed to evaluate SH colours in torch; its values are reused here. `means2d` is a leaf
+    holding the projected centres: its value is not read, its gradient is d loss / d means2d
+    (pixel units), which lands in `means2d.grad` for densification.
+    """
+
+    @staticmethod
+    def forward(ctx, means, log_scales, quats, opacity_logits, rgb_vis, features, means2d, proj, tile_size):
+        np_dtype = proj.np_dtype
+        ids = proj.ids
+        m = ids.size
+        n_feat = 0 if features is None else features.shape[1]
+        n_ch = 4 + n_feat
+        ctx.proj, ctx.n_feat, ctx.has_feat = proj, n_feat, features is not None
+        if m == 0:
+            ctx.state = None
+            return (torch.zeros(proj.height, proj.width, n_ch, dtype=means.dtype),
+                    torch.ones(proj.height, proj.width, dtype=means.dtype))
+        prm = proj.params
+        ch = np.empty((m, n_ch), dtype=np_dtype)
+        ch[:, :3] = _numpy(rgb_vis)
+        ch[:, 3] = prm[:, P.P_Z]
+        if n_feat:
+            ch[:, 4:] = _numpy(features)[ids]
+        out, t_out, ctx.state = _raster_forward(
+            np.ascontiguousarray(prm[:, P.P_U:P.P_V + 1]), np.ascontiguousarray(prm[:, P.P_CA:P.P_CC + 1]),
+            np.ascontiguousarray(prm[:, P.P_OP]), ch, proj.radii[ids], np.ascontiguousarray(prm[:, P.P_Z]),
+            proj.width, proj.height, tile_size)
+        return torch.from_numpy(out), torch.from_numpy(t_out)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g_out, g_t):
+        proj = ctx.proj
+        need = ctx.needs_input_grad
+        dtype = torch.float32 if proj.np_dtype == np.float32 else torch.float64
+        n = proj.means.shape[0]
+        ids = proj.ids
+        m = ids.size
+        g_means = np.zeros((n, 3), np.float64)
+        g_ls = np.zeros((n, 3), np.float64)
+        g_q = np.zeros((n, 4), np.float64)
+        g_lg = np.zeros(n, np.float64)
+        g_rgb = np.zeros((m, 3), proj.np_dtype)
+        g_feat = np.zeros((n, ctx.n_feat), proj.np_dtype)
+        g_m2d = np.zeros((n, 2), proj.np_dtype)
+        if m > 0:
+            full = _raster_backward(ctx.state, _numpy(g_out.to(dtype)), _numpy(g_t.to(dtype)))
+            g_rgb = full[:, K.G_CH:K.G_CH + 3]
+            g_feat[ids] = full[:, K.G_CH + 4:]
+            g_m2d[ids] = full[:, K.G_MX:K.G_MY + 1]
+            if any(need[:4]):
+                gr = np.empty((m, P.NPROJ), np.float64)
+                gr[:, P.P_U:P.P_V + 1] = full[:, K.G_MX:K.G_MY + 1]
+                gr[:, P.P_CA:P.P_CC + 1] = full[:, K.G_CA:K.G_CC + 1]
+                gr[:, P.P_OP] = full[:, K.G_OP]
+                gr[:, P.P_Z] = full[:, K.G_CH + 3]
+                _set_threads()
+                P.project_backward(ids, proj.means, proj.log_scales, proj.quats, proj.logits, proj.cam, gr,
+                                   g_means, g_ls, g_q, g_lg)
+
+        def t(a, i):
+            return torch.from_numpy(np.ascontiguousarray(a)).to(dtype) if need[i] else None
+
+        return (t(g_means, 0), t(g_ls, 1), t(g_q, 2), t(g_lg, 3), t(g_rgb, 4),
+                t(g_feat, 5) if ctx.has_feat else None, t(g_m2d, 6), None, None)
+
+
+def render_fused_cpu(field: GaussianField, camera: Camera, tile_size: int = rules.TILE_SIZE
+                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, int]:
+    """The `cpu` backend's render: numba projection + rasterization in one autograd Function.
+
+    Returns (out (H,W,4+d) = rgb, depth, features; final transmittance (H,W); means2d (N,2), a
+    leaf whose .grad is filled by backward when the field requires grad; radii (N,2) int64;
+    number of visible Gaussians). SH colours are evaluated in torch for the visible Gaussians.
+    """
+    tensors = [field.means, field.log_scales, field.quats, field.opacity_logits, field.colors]
+    if field.features is not None:
+        tensors.append(field.features)
+    if any(t.device.type != "cpu" for t in tensors):
+        raise ValueError("render backend 'cpu' needs CPU tensors; use backend='gsplat' or 'auto' on CUDA")
+    dtype = field.means.dtype
+    if dtype not in (torch.float32, torch.float64):
+        raise ValueError(f"render backend 'cpu' supports float32 and float64, got {dtype}")
+    if any(t.dtype != dtype for t in tensors):
+        raise ValueError("render backend 'cpu': all field tensors must share one dtype, got "
+                         + ", ".join(str(t.dtype) for t in tensors))
+    if camera.width * camera.height > 2**31 - 1:
+        raise ValueError(f"render backend 'cpu': image {camera.width}x{camera.height} is too large")
+    proj = _Projection(field, camera)
+    ids_t = torch.from_numpy(proj.ids)
+    if field.colors.dim() == 2:
+        rgb_vis = field.colors[ids_t]
+    else:   # SH: evaluated in torch (autograd to colours and, through the view direction, means)
+        sub = GaussianField(field.means[ids_t], field.log_scales[ids_t], field.quats[ids_t],
+                            field.opacity_logits[ids_t], field.colors[ids_t])
+        rgb_vis = sub.rgb(torch.as_tensor(camera.center, dtype=dtype))
+    means2d = torch.zeros(field.num, 2, dtype=dtype)
+    means2d[ids_t] = torch.from_numpy(proj.params[:, P.P_U:P.P_V + 1])
+    if torch.is_grad_enabled() and any(t.requires_grad for t in tensors):
+        means2d.requires_grad_(True)
+    out, t_final = _FusedRender.apply(field.means, field.log_scales, field.quats, field.opacity_logits,
+                                      rgb_vis, field.features, means2d, proj, tile_size)
+    return out, t_final, means2d, torch.from_numpy(proj.radii), int(proj.ids.size)

@@ -111,5 +111,6 @@ class GaussianDS(Method):
         field0, how = scene_init(scene, config, d)
         self.info["init"] = how
         self.field = run_trainer(config, views, scene, field0, run_dir, loss_fn, phase="main",
-                                 backend=self._backend, progress=progress, resume=ckpt, extra_state=extra)
+                                 backend=self._backend, progress=progress, resume=ckpt, extra_state=extra,
+                                 method=self)
         self.info["n_gaussians"] = self.field.num
