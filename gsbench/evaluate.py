@@ -50,12 +50,37 @@ def peak_rss_mb() -> float:
     return r / (1024.0 * 1024.0) if platform.system() == "Darwin" else r / 1024.0
 
 
+def gsbench_version() -> Optional[str]:
+    """The installed gsbench distribution's version (None when it is not installed as a package)."""
+    from importlib import metadata
+    try:
+        return metadata.version("gsbench")
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def git_sha() -> Optional[str]:
+    """HEAD commit of the gsbench checkout this code runs from; None when the package folder is not in a
+    git work tree of gsbench (e.g. a wheel install) or git is missing. Read-only (`git rev-parse`)."""
+    import subprocess
+    pkg = Path(__file__).resolve().parent
+    try:
+        top = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=pkg, capture_output=True, text=True, timeout=5)
+        if top.returncode != 0 or Path(top.stdout.strip()).resolve() != pkg.parent:
+            return None   # not a checkout, or a checkout of something else that happens to contain the package
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=pkg, capture_output=True, text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    sha = head.stdout.strip()
+    return sha if head.returncode == 0 and sha else None
+
+
 def machine_info() -> dict:
     import torch
     return {"host": socket.gethostname(), "cpu": platform.processor() or platform.machine(),
             "cores": os.cpu_count(), "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
             "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None,
-            "python": platform.python_version()}
+            "python": platform.python_version(), "gsbench": gsbench_version(), "git_sha": git_sha()}
 
 
 def _mean(values: list) -> Optional[float]:

@@ -25,7 +25,9 @@ value the cell's resolved config has there, so tables always have the same colum
 Cell execution state lives in RUNS_DIR/<run_id>/cell_status.json (the run's own status.json belongs
 to training): state pending|running|done|failed, pid, host, heartbeat (unix seconds) for stale
 detection, attempt count, error and traceback. A cell is done when that file says done and
-results.json exists.
+results.json exists and is not a failure record: a failed cell also gets a results.json with status
+"failed", null metrics and the error in `skipped["run"]` (so reports show "n/a (run failed)" instead
+of "no run"); it stays failed on a re-run and `--retry-failed` runs it again.
 """
 from __future__ import annotations
 
@@ -548,7 +550,7 @@ def cell_state(run_dir: Optional[Path], now: Optional[float] = None) -> str:
     st = read_cell_status(run_dir)
     state = st.get("state", "pending")
     if state == "done":
-        return "done" if (Path(run_dir) / "results.json").exists() else "stale"
+        return "done" if results_finished(run_dir) else "stale"
     if state == "running":
         now = time.time() if now is None else now
         if st.get("host") == socket.gethostname() and st.get("pid") and not pid_alive(int(st["pid"])):
@@ -557,6 +559,62 @@ def cell_state(run_dir: Optional[Path], now: Optional[float] = None) -> str:
             return "stale"
         return "running"
     return state if state in ("failed", "pending") else "pending"
+
+
+def results_finished(run_dir: Path) -> bool:
+    """results.json exists, is readable and is not a failure record (status "failed")."""
+    p = Path(run_dir) / "results.json"
+    if not p.exists():
+        return False
+    try:
+        res = read_json(p)
+    except ValueError:
+        return False
+    return isinstance(res, dict) and res.get("status") != "failed"
+
+
+# Metrics a failed cell records as null (gsbench.store METRIC NAMES), so every table has its row.
+FAILED_METRICS = ("psnr", "ssim", "lpips", "fps", "miou_3dovs", "mbiou_3dovs", "pixel_acc_3dovs",
+                  "miou_lerf", "loc_acc_lerf", "removal_residual", "removal_psnr_outside",
+                  "ordering_adjacent_distance", "ordering_adjacent_mask_iou")
+
+
+def write_failed_results(spec: dict, run_dir: Path, status: dict) -> dict:
+    """results.json of a failed cell (schema: gsbench.store): status "failed", every metric null and
+    the error in skipped["run"]. Identity fields come from the run's config.json when training got
+    that far (the resolved config), else from the cell's config."""
+    from gsbench.evaluate import machine_info
+    from gsbench.store import RESULTS_VERSION
+    cfg_path = run_dir / "config.json"
+    config = spec.get("config") or {}
+    try:
+        if cfg_path.exists():
+            config = read_json(cfg_path)
+    except ValueError:
+        pass
+    scene_name, protocols = None, []
+    try:   # name and protocols as evaluate_run would record them, so the failed cell shares their columns
+        from gsbench.datasets import load_scene
+        from gsbench.evaluate import resolve_protocols
+        scene = load_scene(spec["scene_path"])
+        scene_name = scene.name or Path(scene.path).name
+        protocols, _ = resolve_protocols(scene, "auto")
+    except Exception:  # the scene itself may be what failed; its folder name identifies it
+        pass
+    scene_name = scene_name or Path(str(spec.get("scene_path"))).name
+    reason = f"run failed (attempt {status.get('attempt')}): {status.get('error', 'unknown error')}"
+    results = {
+        "results_version": RESULTS_VERSION, "run_id": run_dir.name, "method": config.get("method", spec.get("method")),
+        "scene": scene_name, "scene_path": str(spec.get("scene_path")), "seed": config.get("seed", spec.get("seed")),
+        "study": config.get("study", spec.get("study")), "grid": config.get("grid") or {}, "config": config,
+        "providers": {"depth": None, "masks": None, "features": None}, "backend": None,
+        "protocol": protocols[0] if protocols else None, "protocols": protocols, "metric_impl": {},
+        "metrics": {m: None for m in FAILED_METRICS}, "per_view": {}, "view_names": [],
+        "skipped": {"run": reason}, "timings": {"train_s": None, "eval_s": None, "cell_wall_s": status.get("wall_s")},
+        "memory": {}, "machine": machine_info(), "status": "failed", "dropped": config.get("dropped", {}),
+    }
+    write_json_atomic(run_dir / "results.json", results)
+    return results
 
 
 class _Heartbeat:
@@ -606,6 +664,10 @@ def run_cell(spec: dict) -> dict:
     except Exception as e:  # recorded per cell; the grid goes on
         status.update(state="failed", finished=time.time(), wall_s=time.time() - t0,
                       error=f"{type(e).__name__}: {e}", traceback=traceback.format_exc())
+        try:
+            write_failed_results(spec, run_dir, status)
+        except Exception as e2:  # the failure itself is still recorded in cell_status.json
+            status["results_error"] = f"could not write the failed results.json: {type(e2).__name__}: {e2}"
         write_json_atomic(run_dir / CELL_STATUS_FILE, status)
     return {"run_dir": str(run_dir), "state": status["state"], "error": status.get("error"),
             "wall_s": status["wall_s"]}

@@ -6,6 +6,7 @@ from typing import Callable, Optional
 
 import torch
 
+from gsbench.errors import InputError, NotBuiltError
 from gsbench.gaussians import GaussianField
 from gsbench.render import resolve_backend
 
@@ -64,13 +65,20 @@ def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Ca
     def _sem(fld: GaussianField) -> dict:
         if fld.features is None or method.autoencoder is None:
             return {}
-        method.feature_provider()          # build (and cache) the text encoder once, on the real method
+        try:   # build (and cache) the text encoder once, on the real method
+            method.feature_provider()
+        except (InputError, NotBuiltError, ImportError, OSError) as e:
+            # e.g. CLIP weights missing while the priors came from the cache: training goes on, and
+            # the log says why this entry has no mIoU (gsbench eval will raise the same error)
+            return {"miou_skipped": f"text encoder unavailable: {type(e).__name__}: {e}"}
         m = copy.copy(method)
         m.field = fld
-        metrics, _ = segmentation_metrics(m, scene, ids, cams, config)
+        metrics, skipped = segmentation_metrics(m, scene, ids, cams, config)
         out = {k: float(metrics[k]) for k in ("miou_3dovs", "miou_lerf") if metrics.get(k) is not None}
         if out:
             out["query_mode"] = (config.get("query") or {}).get("mode", "encode")
+        elif skipped:   # e.g. the eval views carry no segmentation GT
+            out["miou_skipped"] = "; ".join(f"{k}: {v}" for k, v in sorted(skipped.items()))
         return out
 
     return _sem

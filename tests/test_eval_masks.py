@@ -183,3 +183,23 @@ def test_label_masks_for_run_evaluation_match_independent_raster():
     for q, b in boxes.items():
         assert b.shape == (1, 4)
         assert np.allclose(b[0], np.asarray(raw[q], float) / 5.0)
+
+
+def test_results_machine_records_version_and_git_sha(tmp_path):
+    """results.json `machine` carries the gsbench version (pyproject) and the checkout's HEAD sha
+    (read independently here; null when the package folder is not a git checkout)."""
+    import tomllib
+    layout = tmp_path / "scene"
+    _ovs_layout(layout)
+    (tmp_path / "pred").mkdir()
+    res = score_mask_folder(tmp_path / "pred", layout, "3dovs", out_dir=tmp_path / "out")
+    root = Path(__file__).resolve().parents[1]
+    version = tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"]
+    assert res["machine"]["gsbench"] == version
+    on_disk = json.loads((tmp_path / "out" / "results.json").read_text())["machine"]
+    assert on_disk["gsbench"] == version
+    if (root / ".git").exists():
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True).stdout.strip()
+        assert on_disk["git_sha"] == head and len(head) == 40
+    else:
+        assert on_disk["git_sha"] is None

@@ -64,6 +64,8 @@ def test_skip_failed_retry_and_stale(tmp_path, monkeypatch):
     assert sorted(rep.dispatched) == sorted(ids) and sorted(calls) == sorted(ids)
     st = read_json(out / ids[1] / grids.CELL_STATUS_FILE)
     assert st["state"] == "failed" and "simulated failure" in st["error"] and "Traceback" in st["traceback"]
+    failed_res = read_json(out / ids[1] / "results.json")     # a failure record for the reports
+    assert failed_res["status"] == "failed" and "simulated failure" in failed_res["skipped"]["run"]
 
     # re-run: finished cells and the failed one are left alone
     calls.clear()
@@ -75,6 +77,7 @@ def test_skip_failed_retry_and_stale(tmp_path, monkeypatch):
     rep = grids.run_grid(grid, out, SerialExecutor(progress=False), retry_failed=True, log=lambda s: None)
     assert rep.dispatched == [ids[1]] and calls == [ids[1]]
     assert read_json(out / ids[1] / grids.CELL_STATUS_FILE)["attempt"] == 2
+    assert read_json(out / ids[1] / "results.json") == {"metrics": {}}   # the retry's results replace it
 
     # a cell whose worker died (running, dead pid) is stale and runs again; a live one is not touched
     calls.clear()

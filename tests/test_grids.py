@@ -1,6 +1,7 @@
 """Grid files: parsing, validation against the config tree, expansion, cell status."""
 from __future__ import annotations
 
+import math
 import os
 import socket
 import subprocess
@@ -173,3 +174,36 @@ def test_cli_list_dry_run_and_errors(capsys):
 def test_unknown_scene_name_is_an_error():
     with pytest.raises(InputError, match="neither a synthetic preset"):
         _grid(scenes=["tabletop-smal"])
+
+
+def test_failed_cell_writes_failed_results_and_stays_failed(tmp_path, monkeypatch):
+    """A failing cell leaves a results.json with status failed, null metrics and the error as the
+    reason (reports: "n/a (run failed)"), and that record never makes the cell count as done."""
+    from gsbench.collect import collect
+
+    def boom(spec, run_dir, status):
+        raise RuntimeError("simulated crash")
+
+    monkeypatch.setattr(grids, "_train_and_evaluate", boom)
+    run_dir = tmp_path / "runs" / "abc123"
+    spec = {"run_dir": str(run_dir), "scene_path": str(tmp_path / "no-such-scene"), "study": "custom",
+            "axes": {"train.lambda_dssim": 0.2}, "scene": {"path": "x"}, "seed": 3, "method": "vanilla",
+            "config": {"method": "vanilla", "seed": 3, "study": "custom", "grid": {"train.lambda_dssim": 0.2}}}
+    out = grids.run_cell(spec)
+    assert out["state"] == "failed"
+    res = grids.read_json(run_dir / "results.json")
+    assert res["status"] == "failed" and res["run_id"] == "abc123" and res["seed"] == 3
+    assert res["method"] == "vanilla" and res["scene"] == "no-such-scene" and res["study"] == "custom"
+    assert res["grid"] == {"train.lambda_dssim": 0.2}
+    assert res["metrics"]["psnr"] is None and all(v is None for v in res["metrics"].values())
+    assert "simulated crash" in res["skipped"]["run"]
+    assert grids.cell_state(run_dir) == "failed"
+    # a failure record is never "done", even under a cell_status that claims so
+    _status(run_dir, state="done")
+    assert grids.cell_state(run_dir) == "stale"
+    # collect: every metric row is NaN with the reason "run failed"
+    df = collect(tmp_path / "runs")
+    psnr = df[df["metric"] == "psnr"]
+    assert len(psnr) == 1 and math.isnan(psnr["value"].iloc[0])
+    assert psnr["status"].iloc[0] == "failed" and psnr["reason"].iloc[0] == "run failed"
+    assert psnr["axis.train.lambda_dssim"].iloc[0] == 0.2

@@ -55,6 +55,23 @@ def test_run_folder_contract(gds_run):
     assert 0 < s["n_gaussians"] <= 1500
 
 
+def test_periodic_eval_logs_segmentation_miou(gds_run):
+    """Every periodic eval of a semantic run carries the 3D-OVS mIoU (configured query mode) of the eval
+    view; the last one (final field) equals what `gsbench eval` reports for that view."""
+    from gsbench.evaluate import evaluate_run
+    run, cfg = gds_run
+    evals = [r["eval"] for r in read_jsonl(run / "train_log.jsonl") if "eval" in r]
+    assert len(evals) == 2
+    for ev in evals:
+        assert ev["n_views"] == 1 and ev["query_mode"] == cfg["query"]["mode"]
+        assert np.isfinite(ev["miou_3dovs"]) and 0.0 <= ev["miou_3dovs"] <= 1.0
+    res = evaluate_run(run, progress=False)
+    # eval_views=1 picks the first test view; same field, same resolution, same protocol code
+    assert evals[-1]["miou_3dovs"] == pytest.approx(res["per_view"]["miou_3dovs"][0], abs=1e-6)
+    if res["per_view"].get("miou_lerf") and res["per_view"]["miou_lerf"][0] is not None:
+        assert evals[-1]["miou_lerf"] == pytest.approx(res["per_view"]["miou_lerf"][0], abs=1e-6)
+
+
 def test_load_run_and_query_api(gds_run):
     run, _ = gds_run
     m, cfg, scene = load_run(run)
@@ -149,6 +166,10 @@ def test_baselines_tiny(scene, tmp_path, method):
         assert m.semantic_features(cam, "encode").shape == (24, 32, 3)
         log = read_jsonl(run / "train_log.jsonl")
         assert {r["phase"] for r in log} == {"rgb", "semantic"}
+        # periodic mIoU only once the semantic field exists (stage 2)
+        assert all("miou_3dovs" not in r["eval"] for r in log if "eval" in r and r["phase"] == "rgb")
+        sem_evals = [r["eval"] for r in log if "eval" in r and r["phase"] == "semantic"]
+        assert sem_evals and all(0.0 <= e["miou_3dovs"] <= 1.0 for e in sem_evals)
         assert max(r["step"] for r in log if r["phase"] == "semantic") == 10
         # geometry is frozen in stage 2: the optimiser of the semantic phase holds only the latents
         ck = load_torch(run / "checkpoint.pt")

@@ -1,12 +1,25 @@
-"""The `cpu` rasterizer: numba-compiled fused forward and hand-written backward.
+"""The `cpu` backend: numba-compiled fused projection + rasterization with a hand-written backward.
 
-Same contract and numerical rules as the `torch` reference (`rasterize_torch`): it composites the
-per-Gaussian channels (M x C, any C) of the visible Gaussians of a `Projected` and returns
-(H x W x C) channel sums and (H x W) final transmittance. Projection stays the shared
-differentiable `project_gaussians`; this module is a `torch.autograd.Function` over
-(means2d of the visible Gaussians, conics, opacities, channels), so gradients reach
-`proj.means2d` (densification reads `means2d.grad`), the conics, opacities and channels, and
-autograd carries them through the projection.
+`render_fused_cpu(field, camera)` (what `render(..., backend="cpu")` calls) is one
+`torch.autograd.Function` (`_FusedRender`) from the raw field tensors (means, log_scales, quats,
+opacity_logits), the rgb of the visible Gaussians (plain colours indexed, or SH evaluated in
+torch: cheap, and autograd carries it to the colours and means) and the features to
+(H x W x (4 + d)) channel sums (rgb, depth = camera z, features) and (H x W) final transmittance:
+1. projection (`_Projection`; kernels in gsbench/render/cpu_projection.py): camera points and
+   projected centres by the reference's own PyTorch operations (so depth order, depth channel and
+   means2d are bit-identical to `project_gaussians`'), then covariance, conic, opacity, culling and
+   radii in one numba pass per Gaussian (float64, rounded to the working dtype);
+2. rasterization as below; its backward gives per-visible-Gaussian gradients of means2d, conic,
+   opacity and channels; the depth channel's gradient is that of camera z;
+3. projection backward (numba, one Gaussian per iteration, float64): those gradients to means,
+   log_scales, quats and opacity logits (no reduction, so deterministic).
+`means2d` (N, 2) is a leaf tensor holding the projected centres and passed to the Function as an
+extra input whose value is not read: the Function returns d loss / d means2d (pixel units) for it,
+so `out.means2d.grad` is filled after backward exactly as the reference's retained gradient
+(densification reads it). It requires grad only when a field tensor does.
+
+`rasterize_cpu(proj, channels, W, H)` keeps the rasterizer-only API (`_Rasterize`: the same
+kernels behind a Function over means2d, conics, opacities and channels of a torch `Projected`).
 
 How it runs (kernels in gsbench/render/cpu_kernels.py):
 1. sort the visible Gaussians by depth (stable), bin them into 16x16 tiles with the reference's
@@ -43,7 +56,7 @@ from gsbench.gaussians import GaussianField
 from gsbench.render import cpu_kernels as K
 from gsbench.render import cpu_projection as P
 from gsbench.render import rules
-from gsbench.render.projection import Projected
+from gsbench.render.projection import Projected, camera_tensors
 from gsbench.scene import Camera
 
 # Must precede the first parallel kernel launch. Set in the environment too: numba re-reads its
@@ -210,20 +223,26 @@ class _Projection:
     def __init__(self, field: GaussianField, camera: Camera):
         dtype = field.means.dtype
         self.np_dtype = np.float32 if dtype == torch.float32 else np.float64
-        self.means = _numpy64(field.means)
         self.log_scales = _numpy64(field.log_scales)
         self.quats = _numpy64(field.quats)
         self.logits = _numpy64(field.opacity_logits)
+        self.n = field.num
+        R_wc, t_wc, Kt = camera_tensors(camera, "cpu", dtype)
+        with torch.no_grad():   # the reference's operations: depth order, depth and means2d bit-identical
+            mc = field.means.detach() @ R_wc.T + t_wc
+            zs = torch.where(mc[:, 2] != 0, mc[:, 2], torch.ones_like(mc[:, 2]))   # culled by the near plane
+            uv = torch.stack([Kt[0, 0] * mc[:, 0] / zs + Kt[0, 2], Kt[1, 1] * mc[:, 1] / zs + Kt[1, 2]], -1)
+        self.pc = _numpy64(mc)
         w2c = np.asarray(camera.world_to_camera, dtype=np.float64)
         self.cam = P.camera_array(w2c[:3, :3], w2c[:3, 3], np.asarray(camera.K, np.float64),
                                   camera.width, camera.height)
         self.width, self.height = int(camera.width), int(camera.height)
-        n = self.means.shape[0]
+        n = self.n
         ok = np.empty(n, np.bool_)
         params = np.empty((n, P.NPROJ), np.float64)
         self.radii = np.empty((n, 2), np.int64)
         _set_threads()
-        P.project_forward(self.means, self.log_scales, self.quats, self.logits, self.cam,
+        P.project_forward(self.pc, _numpy64(uv), self.log_scales, self.quats, self.logits, self.cam,
                           self.width, self.height, self.np_dtype == np.float32, ok, params, self.radii)
         self.ids = np.flatnonzero(ok)
         self.params = params[self.ids].astype(self.np_dtype)     # (M, NPROJ) working dtype
@@ -269,7 +288,7 @@ class _FusedRender(torch.autograd.Function):
         proj = ctx.proj
         need = ctx.needs_input_grad
         dtype = torch.float32 if proj.np_dtype == np.float32 else torch.float64
-        n = proj.means.shape[0]
+        n = proj.n
         ids = proj.ids
         m = ids.size
         g_means = np.zeros((n, 3), np.float64)
@@ -291,7 +310,7 @@ class _FusedRender(torch.autograd.Function):
                 gr[:, P.P_OP] = full[:, K.G_OP]
                 gr[:, P.P_Z] = full[:, K.G_CH + 3]
                 _set_threads()
-                P.project_backward(ids, proj.means, proj.log_scales, proj.quats, proj.logits, proj.cam, gr,
+                P.project_backward(ids, proj.pc, proj.log_scales, proj.quats, proj.logits, proj.cam, gr,
                                    g_means, g_ls, g_q, g_lg)
 
         def t(a, i):

@@ -4,7 +4,8 @@ The same mathematics and rules as the reference `project_gaussians` (gsbench/ren
 one Gaussian per loop iteration (numba prange): each Gaussian's values and gradients depend on that
 Gaussian only, so there is no reduction and results are bit-identical for any thread count.
 
-Everything is computed in float64 (one compiled specialisation; inputs are converted, outputs are
+Camera-space points and projected centres come from the caller (PyTorch, working dtype, the
+reference's operations); everything else is computed in float64 (one compiled specialisation; inputs are converted, outputs are
 rounded to the working dtype by the caller). Per Gaussian (camera R, t, fx, fy, cx, cy):
     p = R m + t = (x, y, z);   u = fx x / z + cx,  v = fy y / z + cy          (means2d)
     s = exp(clamp(log_scales, -30, 30))      (no gradient outside the clamp, as torch.clamp)
@@ -17,8 +18,8 @@ rounded to the working dtype by the caller). Per Gaussian (camera R, t, fx, fy, 
     cov = (xx + EPS2D, xy, yy + EPS2D);  conic = (cov_yy, -cov_xy, cov_xx) / det
     opacity = sigmoid(logit);  depth channel = z
 Culling (culled Gaussians get ok = False, radii 0 and zero gradients): z outside
-[NEAR_PLANE, FAR_PLANE] or non-finite camera coordinates; non-finite covariance or determinant, or
-det <= 0; opacity < ALPHA_MIN (compared in the working dtype, as the reference does); screen box
+[NEAR_PLANE, FAR_PLANE] or non-finite camera coordinates; covariance or determinant not finite
+(in float64 or once rounded to the working dtype), or det <= 0; opacity < ALPHA_MIN (compared in the working dtype, as the reference does); screen box
 (radius = ceil(extend sqrt(cov)) per axis) off the image or of radius 0.
 
 Parameter row layout (float64, shared by forward output and backward gradient input):
@@ -91,14 +92,14 @@ def _rot(qw, qx, qy, qz, rq):
 
 
 @njit(inline="always", **_OPTS)
-def _geometry(g, means, log_scales, quats, cam, p, s, qn, rq, B, J, M, A):
+def _geometry(g, pc, log_scales, quats, cam, p, s, qn, rq, B, J, M, A):
     """Fill camera point p, scales s, unit quaternion qn, rotation rq, B = R rq, J, M = J B, A = M diag(s).
 
     Returns (qnorm, small, clamped_x, clamped_y, cx_val, cy_val): the quaternion norm, whether it was
     replaced by the identity, and whether (and to what value) x/z, y/z were clamped.
     """
     for r in range(3):
-        p[r] = cam[9 + r] + (cam[3 * r] * means[g, 0] + cam[3 * r + 1] * means[g, 1] + cam[3 * r + 2] * means[g, 2])
+        p[r] = pc[g, r]
     for k in range(3):
         s[k] = np.exp(min(max(log_scales[g, k], _LSMIN), _LSMAX))
     n2 = quats[g, 0] * quats[g, 0] + quats[g, 1] * quats[g, 1] + quats[g, 2] * quats[g, 2] + quats[g, 3] * quats[g, 3]
@@ -153,9 +154,14 @@ def _cov(A):
 
 
 @njit(parallel=True, **_OPTS)
-def project_forward(means, log_scales, quats, logits, cam, width, height, f32, ok, params, radii):
-    """Project and cull every Gaussian: ok (N,) bool, params (N, NPROJ), radii (N, 2) int64 (0 if culled)."""
-    n = means.shape[0]
+def project_forward(pc, uv, log_scales, quats, logits, cam, width, height, f32, ok, params, radii):
+    """Project and cull every Gaussian: ok (N,) bool, params (N, NPROJ), radii (N, 2) int64 (0 if culled).
+
+    pc (N, 3): camera-space points R m + t and uv (N, 2): projected centres, both computed by the
+    caller with the reference's own PyTorch operations in the working dtype (so depth order, depth
+    channel and means2d are bit-identical to the reference's), given here as float64.
+    """
+    n = pc.shape[0]
     for g in prange(n):
         p = np.empty(3)
         s = np.empty(3)
@@ -171,16 +177,19 @@ def project_forward(means, log_scales, quats, logits, cam, width, height, f32, o
         for k in range(NPROJ):
             params[g, k] = 0.0
         for r in range(3):
-            p[r] = cam[9 + r] + (cam[3 * r] * means[g, 0] + cam[3 * r + 1] * means[g, 1] + cam[3 * r + 2] * means[g, 2])
+            p[r] = pc[g, r]
         z = p[2]
         if not (z >= _NEAR and z <= _FAR and np.isfinite(p[0]) and np.isfinite(p[1]) and np.isfinite(z)):
             continue
-        _geometry(g, means, log_scales, quats, cam, p, s, qn, rq, B, J, M, A)
+        _geometry(g, pc, log_scales, quats, cam, p, s, qn, rq, B, J, M, A)
         xx, xy, yy, m01, m02, m12, det = _cov(A)
         cxx = xx + _EPS
         cyy = yy + _EPS
         if not (np.isfinite(cxx) and np.isfinite(xy) and np.isfinite(cyy) and np.isfinite(det) and det > 0.0):
             continue
+        if f32 and not (np.isfinite(np.float32(cxx)) and np.isfinite(np.float32(xy)) and np.isfinite(np.float32(cyy))
+                        and np.isfinite(np.float32(det))):
+            continue    # overflows the working dtype: the reference culls it
         op = _sigmoid(logits[g])
         opw = np.float64(np.float32(op)) if f32 else op
         if not (opw >= (_AMIN32 if f32 else _AMIN)):
@@ -188,8 +197,8 @@ def project_forward(means, log_scales, quats, logits, cam, width, height, f32, o
         extend = min(np.sqrt(max(2.0 * np.log(max(op, _AMIN) / _AMIN), 0.0)), _EXT)
         rx = np.ceil(extend * np.sqrt(max(cxx, 0.0)))
         ry = np.ceil(extend * np.sqrt(max(cyy, 0.0)))
-        u = cam[12] * p[0] / z + cam[14]
-        v = cam[13] * p[1] / z + cam[15]
+        u = uv[g, 0]
+        v = uv[g, 1]
         if not (np.isfinite(u) and np.isfinite(v) and np.isfinite(rx) and np.isfinite(ry)):
             continue
         if not (u + rx > 0.0 and u - rx < width and v + ry > 0.0 and v - ry < height and rx > 0.0 and ry > 0.0):
@@ -207,7 +216,7 @@ def project_forward(means, log_scales, quats, logits, cam, width, height, f32, o
 
 
 @njit(parallel=True, **_OPTS)
-def project_backward(ids, means, log_scales, quats, logits, cam, grads, g_means, g_log_scales, g_quats, g_logits):
+def project_backward(ids, pc, log_scales, quats, logits, cam, grads, g_means, g_log_scales, g_quats, g_logits):
     """Gradients of the raw field tensors from gradients of the projected rows (`grads` (M, NPROJ),
     rows aligned with `ids`). Writes rows ids of the outputs (the others are left untouched: zero)."""
     m = ids.size
@@ -224,7 +233,7 @@ def project_backward(ids, means, log_scales, quats, logits, cam, grads, g_means,
         dA = np.zeros((2, 3))
         dJ = np.zeros((2, 3))
         dR = np.zeros((3, 3))
-        qnorm, small, clx, cly, cxv, cyv = _geometry(g, means, log_scales, quats, cam, p, s, qn, rq, B, J, M, A)
+        qnorm, small, clx, cly, cxv, cyv = _geometry(g, pc, log_scales, quats, cam, p, s, qn, rq, B, J, M, A)
         xx, xy, yy, m01, m02, m12, det = _cov(A)
         x, y, z = p[0], p[1], p[2]
         fx, fy = cam[12], cam[13]
