@@ -85,8 +85,9 @@ def _axis_label(col: str, v: Any) -> str:
         return FORMULATION_LABELS.get(v, str(v))
     if col == AX_NOISE_TYPE:
         return NOISE_LABELS.get(v, str(v))
-    if isinstance(v, float) and v.is_integer():
-        return str(int(v))
+    if isinstance(v, float):
+        # 3.0 -> "3", 1e38 -> "1e+38" (never a 39-digit integer)
+        return str(int(v)) if v.is_integer() and abs(v) < 1e15 else f"{v:g}"
     return str(v)
 
 

@@ -467,3 +467,73 @@ def test_depth_gradient_reaches_means_by_hand():
     assert abs(out.depth[4, 4].item() - 1.0) < 1e-12
     assert abs(leaf.means.grad[0, 2].item() - 0.5) < 1e-12
     assert abs(leaf.means.grad[0, 0].item()) < 1e-12 and abs(leaf.means.grad[0, 1].item()) < 1e-12
+
+
+def test_means2d_requires_grad_like_reference_and_empty_field():
+    field, cam = random_field(30, 80), _camera(16, 16)
+    f32 = field.to(dtype=torch.float32)
+    for grad_means in (True, False):
+        leaf = GaussianField(**{k: (None if v is None else v.clone().requires_grad_(k != "means" or grad_means))
+                                for k, v in f32.tensors().items()})
+        outs = {be: render(leaf, cam, backend=be) for be in ("cpu", "torch")}
+        for be, out in outs.items():
+            assert out.means2d.requires_grad == grad_means, be
+            (out.rgb.sum() + out.features.sum()).backward()
+            assert (out.means2d.grad is not None) == grad_means, be
+        assert torch.equal(outs["cpu"].radii, outs["torch"].radii)
+    empty = GaussianField(**{k: (None if v is None else v[:0].clone().requires_grad_(True))
+                             for k, v in f32.tensors().items()})
+    out = render(empty, cam, backend="cpu")
+    assert out.means2d.shape == (0, 2) and torch.all(out.alpha == 0)
+    out.rgb.sum().backward()
+    assert empty.means.grad is not None and empty.means.grad.shape == (0, 3)
+
+
+def _rotated_camera(w: int, h: int, f: float | None = None, seed: int = 3) -> Camera:
+    """A camera with a generic rotation and translation (the other tests use the identity pose)."""
+    q = torch.randn(4, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+    from gsbench.gaussians import normalize_quats, quat_to_rotmat
+    R = quat_to_rotmat(normalize_quats(q[None]))[0].numpy()
+    c = np.array([0.3, -0.2, 0.1])                      # camera centre in world
+    w2c = np.eye(4)
+    w2c[:3, :3] = R
+    w2c[:3, 3] = -R @ c
+    f = float(max(w, h)) if f is None else f
+    K = np.array([[f, 0.0, w / 2.0], [0.0, f, h / 2.0], [0.0, 0.0, 1.0]])
+    return Camera(K, w2c, w, h)
+
+
+def _field_in_front(cam: Camera, n: int, seed: int, sh: int = 0) -> GaussianField:
+    """random_field placed in front of `cam` (camera coordinates mapped to world)."""
+    f = random_field(n, seed, sh=sh)
+    R, t = cam.world_to_camera[:3, :3], cam.world_to_camera[:3, 3]
+    world = (f.means.numpy() - t) @ R                    # inverse of x_c = R x_w + t
+    return GaussianField(torch.from_numpy(world), f.log_scales, f.quats, f.opacity_logits, f.colors, f.features)
+
+
+@pytest.mark.parametrize("dtype,out_tol,grad_tol", [(torch.float32, 1e-5, 1e-4), (torch.float64, 1e-12, 1e-10)])
+def test_rotated_translated_camera_matches_torch(dtype, out_tol, grad_tol):
+    cam = _rotated_camera(40, 32)
+    field = _field_in_front(cam, 150, 90, sh=4)
+    from gsbench.render.cpu_backend import _Projection
+    mine, ref = _Projection(field.to(dtype=dtype), cam), project_gaussians(field.to(dtype=dtype), cam)
+    assert np.array_equal(mine.ids, ref.ids.numpy()) and mine.ids.size > 50
+    oc, gc = run(field, cam, "cpu", dtype=dtype)
+    ot, gt = run(field, cam, "torch", dtype=dtype)
+    assert_outputs_close(oc, ot, out_tol)
+    assert_grads_close(gc, gt, grad_tol)
+
+
+def test_gradcheck_float64_rotated_camera():
+    cam = _rotated_camera(12, 10, f=8.0, seed=5)
+    field = _field_in_front(cam, 6, 91)
+    f = GaussianField(field.means, field.log_scales.clamp(math.log(0.1), math.log(0.3)), field.quats,
+                      field.opacity_logits, field.colors, field.features)
+
+    def fn(means, log_scales, quats, logits, colors, feats):
+        out = render(GaussianField(means, log_scales, quats, logits, colors, feats), cam, backend="cpu")
+        return out.rgb, out.depth, out.alpha, out.features
+
+    assert project_gaussians(f, cam).ids.numel() >= 3
+    inputs = tuple(f.tensors()[k].clone().requires_grad_(True) for k in PARAMS)
+    assert torch.autograd.gradcheck(fn, inputs, eps=1e-6, atol=1e-6, rtol=1e-5)

@@ -92,18 +92,18 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
         # fused numba projection + rasterization (gsbench/render/cpu_backend.py); means2d is a leaf
         # whose .grad the backward fills
         from gsbench.render.cpu_backend import render_fused_cpu
-        out, t_final, means2d, radii, n_visible = render_fused_cpu(field, camera)
+        rgb, depth, feats, t_final, means2d, radii, n_visible = render_fused_cpu(field, camera)
     else:
         out, t_final, means2d, radii, n_visible = _render_projected(field, camera, name)
-    rgb = out[..., :3]
+        rgb, depth = out[..., :3], out[..., 3]
+        feats = out[..., 4:] if field.features is not None else None
     if background is not None:
         bg = torch.as_tensor(background, device=device, dtype=dtype)
         if bg.numel() != 3:
             raise ValueError(f"render background must be 3 values (RGB), got shape {tuple(bg.shape)}")
         bg = bg.reshape(1, 1, 3)
         rgb = rgb + t_final[..., None] * bg
-    feats = out[..., 4:] if field.features is not None else None
-    return RenderOutput(rgb=rgb, depth=out[..., 3], features=feats, alpha=1.0 - t_final, backend=name,
+    return RenderOutput(rgb=rgb, depth=depth, features=feats, alpha=1.0 - t_final, backend=name,
                         means2d=means2d, radii=radii,
                         info={"n_gaussians": field.num, "n_visible": n_visible,
                               "width": camera.width, "height": camera.height,

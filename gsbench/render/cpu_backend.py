@@ -6,9 +6,10 @@ opacity_logits), the rgb of the visible Gaussians (plain colours indexed, or SH 
 torch: cheap, and autograd carries it to the colours and means) and the features to
 (H x W x (4 + d)) channel sums (rgb, depth = camera z, features) and (H x W) final transmittance:
 1. projection (`_Projection`; kernels in gsbench/render/cpu_projection.py): camera points and
-   projected centres by the reference's own PyTorch operations (so depth order, depth channel and
-   means2d are bit-identical to `project_gaussians`'), then covariance, conic, opacity, culling and
-   radii in one numba pass per Gaussian (float64, rounded to the working dtype);
+   projected centres with the reference's operations in its order, in the working dtype (numpy:
+   depth order, depth channel and means2d equal `project_gaussians`' bit for bit), then
+   covariance, conic, opacity, culling and radii in one numba pass per Gaussian (float64,
+   rounded to the working dtype);
 2. rasterization as below; its backward gives per-visible-Gaussian gradients of means2d, conic,
    opacity and channels; the depth channel's gradient is that of camera z;
 3. projection backward (numba, one Gaussian per iteration, float64): those gradients to means,
@@ -16,7 +17,7 @@ torch: cheap, and autograd carries it to the colours and means) and the features
 `means2d` (N, 2) is a leaf tensor holding the projected centres and passed to the Function as an
 extra input whose value is not read: the Function returns d loss / d means2d (pixel units) for it,
 so `out.means2d.grad` is filled after backward exactly as the reference's retained gradient
-(densification reads it). It requires grad only when a field tensor does.
+(densification reads it). Like the reference's, it requires grad only when `field.means` does.
 
 `rasterize_cpu(proj, channels, W, H)` keeps the rasterizer-only API (`_Rasterize`: the same
 kernels behind a Function over means2d, conics, opacities and channels of a torch `Projected`).
@@ -227,12 +228,18 @@ class _Projection:
         self.quats = _numpy64(field.quats)
         self.logits = _numpy64(field.opacity_logits)
         self.n = field.num
-        R_wc, t_wc, Kt = camera_tensors(camera, "cpu", dtype)
-        with torch.no_grad():   # the reference's operations: depth order, depth and means2d bit-identical
-            mc = field.means.detach() @ R_wc.T + t_wc
-            zs = torch.where(mc[:, 2] != 0, mc[:, 2], torch.ones_like(mc[:, 2]))   # culled by the near plane
-            uv = torch.stack([Kt[0, 0] * mc[:, 0] / zs + Kt[0, 2], Kt[1, 1] * mc[:, 1] / zs + Kt[1, 2]], -1)
-        self.pc = _numpy64(mc)
+        # Camera points and centres in the working dtype with the reference's operations, in its
+        # order (R m + t as ((m0 R0 + m1 R1) + m2 R2) + t, then (fx x) / z + cx), in numpy rather than
+        # PyTorch: serial, so no OpenMP workers are left spinning against the numba kernels.
+        R_wc, t_wc, Kt = (a.numpy() for a in camera_tensors(camera, "cpu", dtype))
+        m = field.means.detach().numpy()
+        mc = np.empty((self.n, 3), dtype=self.np_dtype)
+        for r in range(3):
+            mc[:, r] = ((m[:, 0] * R_wc[r, 0] + m[:, 1] * R_wc[r, 1]) + m[:, 2] * R_wc[r, 2]) + t_wc[r]
+        with np.errstate(all="ignore"):     # non-finite / behind-camera points are culled by the kernel
+            zs = np.where(mc[:, 2] != 0, mc[:, 2], self.np_dtype(1.0))
+            uv = np.stack([Kt[0, 0] * mc[:, 0] / zs + Kt[0, 2], Kt[1, 1] * mc[:, 1] / zs + Kt[1, 2]], -1)
+        self.pc = mc.astype(np.float64)
         w2c = np.asarray(camera.world_to_camera, dtype=np.float64)
         self.cam = P.camera_array(w2c[:3, :3], w2c[:3, 3], np.asarray(camera.K, np.float64),
                                   camera.width, camera.height)
@@ -242,15 +249,22 @@ class _Projection:
         params = np.empty((n, P.NPROJ), np.float64)
         self.radii = np.empty((n, 2), np.int64)
         _set_threads()
-        P.project_forward(self.pc, _numpy64(uv), self.log_scales, self.quats, self.logits, self.cam,
+        P.project_forward(self.pc, uv.astype(np.float64), self.log_scales, self.quats, self.logits, self.cam,
                           self.width, self.height, self.np_dtype == np.float32, ok, params, self.radii)
         self.ids = np.flatnonzero(ok)
         self.params = params[self.ids].astype(self.np_dtype)     # (M, NPROJ) working dtype
 
 
+def _split(out: np.ndarray, t_out: np.ndarray) -> tuple[torch.Tensor, ...]:
+    """(H,W,4+d) channel sums -> separate contiguous rgb, depth, features (H,W,d) and T tensors."""
+    return (torch.from_numpy(np.ascontiguousarray(out[..., :3])), torch.from_numpy(np.ascontiguousarray(out[..., 3])),
+            torch.from_numpy(np.ascontiguousarray(out[..., 4:])), torch.from_numpy(t_out))
+
+
 class _FusedRender(torch.autograd.Function):
     """(means, log_scales, quats, opacity_logits, rgb of the visible Gaussians (M,3), features (N,d)
-    or None, means2d probe (N,2)) -> (out (H,W,4+d): rgb, depth, features; T (H,W)).
+    or None, means2d probe (N,2)) -> (rgb (H,W,3), depth (H,W), features (H,W,d), T (H,W)).
+    Separate outputs, so no PyTorch slicing (and slice-backward) ops surround the kernels.
 
     The projection was run by the caller (`_Projection`, passed as `proj`) because the visible set
     is needed to evaluate SH colours in torch; its values are reused here. `means2d` is a leaf
@@ -268,8 +282,8 @@ class _FusedRender(torch.autograd.Function):
         ctx.proj, ctx.n_feat, ctx.has_feat = proj, n_feat, features is not None
         if m == 0:
             ctx.state = None
-            return (torch.zeros(proj.height, proj.width, n_ch, dtype=means.dtype),
-                    torch.ones(proj.height, proj.width, dtype=means.dtype))
+            out = np.zeros((proj.height, proj.width, n_ch), dtype=np_dtype)
+            return _split(out, np.ones((proj.height, proj.width), dtype=np_dtype))
         prm = proj.params
         ch = np.empty((m, n_ch), dtype=np_dtype)
         ch[:, :3] = _numpy(rgb_vis)
@@ -280,11 +294,11 @@ class _FusedRender(torch.autograd.Function):
             np.ascontiguousarray(prm[:, P.P_U:P.P_V + 1]), np.ascontiguousarray(prm[:, P.P_CA:P.P_CC + 1]),
             np.ascontiguousarray(prm[:, P.P_OP]), ch, proj.radii[ids], np.ascontiguousarray(prm[:, P.P_Z]),
             proj.width, proj.height, tile_size)
-        return torch.from_numpy(out), torch.from_numpy(t_out)
+        return _split(out, t_out)
 
     @staticmethod
     @torch.autograd.function.once_differentiable
-    def backward(ctx, g_out, g_t):
+    def backward(ctx, g_rgb_img, g_depth_img, g_feat_img, g_t):
         proj = ctx.proj
         need = ctx.needs_input_grad
         dtype = torch.float32 if proj.np_dtype == np.float32 else torch.float64
@@ -299,7 +313,18 @@ class _FusedRender(torch.autograd.Function):
         g_feat = np.zeros((n, ctx.n_feat), proj.np_dtype)
         g_m2d = np.zeros((n, 2), proj.np_dtype)
         if m > 0:
-            full = _raster_backward(ctx.state, _numpy(g_out.to(dtype)), _numpy(g_t.to(dtype)))
+            # assembled in numpy (serial): no PyTorch slice-backward ops whose OpenMP workers would
+            # keep spinning while the numba kernels run
+            g_out = np.zeros((proj.height, proj.width, 4 + ctx.n_feat), dtype=proj.np_dtype)
+            if g_rgb_img is not None:
+                g_out[..., :3] = _numpy(g_rgb_img)
+            if g_depth_img is not None:
+                g_out[..., 3] = _numpy(g_depth_img)
+            if g_feat_img is not None and ctx.n_feat:
+                g_out[..., 4:] = _numpy(g_feat_img)
+            g_t_np = (np.zeros((proj.height, proj.width), dtype=proj.np_dtype) if g_t is None
+                      else _numpy(g_t.to(dtype)))
+            full = _raster_backward(ctx.state, g_out, g_t_np)
             g_rgb = full[:, K.G_CH:K.G_CH + 3]
             g_feat[ids] = full[:, K.G_CH + 4:]
             g_m2d[ids] = full[:, K.G_MX:K.G_MY + 1]
@@ -320,13 +345,12 @@ class _FusedRender(torch.autograd.Function):
                 t(g_feat, 5) if ctx.has_feat else None, t(g_m2d, 6), None, None)
 
 
-def render_fused_cpu(field: GaussianField, camera: Camera, tile_size: int = rules.TILE_SIZE
-                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, int]:
+def render_fused_cpu(field: GaussianField, camera: Camera, tile_size: int = rules.TILE_SIZE) -> tuple:
     """The `cpu` backend's render: numba projection + rasterization in one autograd Function.
 
-    Returns (out (H,W,4+d) = rgb, depth, features; final transmittance (H,W); means2d (N,2), a
-    leaf whose .grad is filled by backward when the field requires grad; radii (N,2) int64;
-    number of visible Gaussians). SH colours are evaluated in torch for the visible Gaussians.
+    Returns (rgb (H,W,3), depth (H,W), features (H,W,d) or None, final transmittance (H,W),
+    means2d (N,2), a leaf whose .grad is filled by backward when field.means requires grad,
+    radii (N,2) int64, number of visible Gaussians). SH colours are evaluated in torch for the visible Gaussians.
     """
     tensors = [field.means, field.log_scales, field.quats, field.opacity_logits, field.colors]
     if field.features is not None:
@@ -351,8 +375,10 @@ def render_fused_cpu(field: GaussianField, camera: Camera, tile_size: int = rule
         rgb_vis = sub.rgb(torch.as_tensor(camera.center, dtype=dtype))
     means2d = torch.zeros(field.num, 2, dtype=dtype)
     means2d[ids_t] = torch.from_numpy(proj.params[:, P.P_U:P.P_V + 1])
-    if torch.is_grad_enabled() and any(t.requires_grad for t in tensors):
+    if torch.is_grad_enabled() and field.means.requires_grad:   # as the reference's means2d
         means2d.requires_grad_(True)
-    out, t_final = _FusedRender.apply(field.means, field.log_scales, field.quats, field.opacity_logits,
-                                      rgb_vis, field.features, means2d, proj, tile_size)
-    return out, t_final, means2d, torch.from_numpy(proj.radii), int(proj.ids.size)
+    rgb, depth, feats, t_final = _FusedRender.apply(field.means, field.log_scales, field.quats,
+                                                    field.opacity_logits, rgb_vis, field.features, means2d,
+                                                    proj, tile_size)
+    return (rgb, depth, feats if field.features is not None else None, t_final, means2d,
+            torch.from_numpy(proj.radii), int(proj.ids.size))

@@ -4,9 +4,9 @@ The same mathematics and rules as the reference `project_gaussians` (gsbench/ren
 one Gaussian per loop iteration (numba prange): each Gaussian's values and gradients depend on that
 Gaussian only, so there is no reduction and results are bit-identical for any thread count.
 
-Camera-space points and projected centres come from the caller (PyTorch, working dtype, the
-reference's operations); everything else is computed in float64 (one compiled specialisation; inputs are converted, outputs are
-rounded to the working dtype by the caller). Per Gaussian (camera R, t, fx, fy, cx, cy):
+Camera-space points and projected centres come from the caller (working dtype, the reference's
+operations); everything else is computed in float64 (one compiled specialisation; inputs are
+converted, outputs are rounded to the working dtype by the caller). Per Gaussian (camera R, t, fx, fy, cx, cy):
     p = R m + t = (x, y, z);   u = fx x / z + cx,  v = fy y / z + cy          (means2d)
     s = exp(clamp(log_scales, -30, 30))      (no gradient outside the clamp, as torch.clamp)
     qn = q / |q|, or the identity with zero gradient when |q|^2 < QUAT_EPS
@@ -19,8 +19,9 @@ rounded to the working dtype by the caller). Per Gaussian (camera R, t, fx, fy, 
     opacity = sigmoid(logit);  depth channel = z
 Culling (culled Gaussians get ok = False, radii 0 and zero gradients): z outside
 [NEAR_PLANE, FAR_PLANE] or non-finite camera coordinates; covariance or determinant not finite
-(in float64 or once rounded to the working dtype), or det <= 0; opacity < ALPHA_MIN (compared in the working dtype, as the reference does); screen box
-(radius = ceil(extend sqrt(cov)) per axis) off the image or of radius 0.
+(in float64 or once rounded to the working dtype), or det <= 0; opacity < ALPHA_MIN (compared
+in the working dtype, as the reference does); screen box (radius = ceil(extend sqrt(cov)) per
+axis) off the image or of radius 0.
 
 Parameter row layout (float64, shared by forward output and backward gradient input):
     P_U, P_V, P_CA, P_CB, P_CC, P_OP, P_Z
@@ -28,7 +29,6 @@ Camera array layout: R (row-major, 9), t (3), fx, fy, cx, cy, lim_x_neg, lim_x_p
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba import njit, prange
@@ -158,8 +158,8 @@ def project_forward(pc, uv, log_scales, quats, logits, cam, width, height, f32, 
     """Project and cull every Gaussian: ok (N,) bool, params (N, NPROJ), radii (N, 2) int64 (0 if culled).
 
     pc (N, 3): camera-space points R m + t and uv (N, 2): projected centres, both computed by the
-    caller with the reference's own PyTorch operations in the working dtype (so depth order, depth
-    channel and means2d are bit-identical to the reference's), given here as float64.
+    caller with the reference's operations, in its order, in the working dtype (so depth order,
+    depth channel and means2d equal the reference's bit for bit), given here as float64.
     """
     n = pc.shape[0]
     for g in prange(n):
