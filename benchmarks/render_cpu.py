@@ -30,6 +30,8 @@ import sys
 import time
 
 import numpy as np
+
+import gsbench  # noqa: F401  (before torch: gsbench's OpenMP default, the same for both backends)
 import torch
 
 from gsbench.gaussians import GaussianField
@@ -187,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"scene {w}x{h}, {n} Gaussians, {4 + a.features} channels, {threads} threads", file=sys.stderr, flush=True)
         rows.append(bench_scene(w, h, int(n), a.features, a.seed, a.repeats, threads))
     print(markdown(rows))
-    print(f"\nthreads: {threads}; torch {torch.__version__}; timing: best of repeats; "
+    print(f"\nthreads: {threads}; GOMP_SPINCOUNT={os.environ.get('GOMP_SPINCOUNT')}; torch {torch.__version__}; timing: best of repeats; "
           f"memory: peak RSS increase of one forward+backward in a fresh process")
     if a.json:
         from gsbench.store import write_json_atomic

@@ -13,7 +13,7 @@ resolution and computes everything the scene supports:
 Whatever cannot be computed is in `skipped` with the reason; its value is null, never invented.
 
 `score_mask_folder(pred_dir, layout_dir, protocol)` scores another method's masks with the same
-protocol code. Folder formats (docs/eval_grids.md):
+protocol code. Folder formats (README, Evaluation and ablation grids):
   3dovs: <pred>/<view>/<class>.png (255 = class) or <pred>/<view>.png (class index, 255 = none),
          <view> = the segmentations/<idx> folder name or the stem of the idx-th sorted image;
   lerf:  <pred>/<frame_stem>/<query>.png (non-zero = query), '/' in a query written as '_'.

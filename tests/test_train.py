@@ -195,6 +195,6 @@ def test_gaussiands_cpu_small_on_tabletop_small(tmp_path):
     assert s["status"] == "done" and s["iterations"] == 500 and s["train_s"] < 600
     res = evaluate_run(run)
     m = res["metrics"]
-    # measured 27.0 dB / 0.79 / 0.59 (docs/methods.md); bounds leave room for backend nondeterminism
+    # measured 27.0 dB / 0.79 / 0.59 (README, Methods and training); bounds leave room for backend nondeterminism
     assert m["psnr"] > 24.0
     assert m["miou_3dovs"] > 0.6 and m["mbiou_3dovs"] > 0.4
