@@ -23,7 +23,7 @@ from gsbench.reports.spec import (  # noqa: E402
     AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE, LOGICAL, NOISE_LABELS, NOISE_ORDER,
     method_label, metric_spec,
 )
-from gsbench.reports.studies import PROTOCOL_SHORT, _get, _slug, lambda_points, pearson, scene_protocols  # noqa: E402
+from gsbench.reports.studies import PROTOCOL_SHORT, _get, _slug, lambda_points, pearson, runs_of, scene_protocols  # noqa: E402
 from gsbench.reports.table import Table  # noqa: E402
 from gsbench.store import read_jsonl, write_bytes_atomic  # noqa: E402
 
@@ -299,8 +299,7 @@ def plot_noise(res: Results, path_prefix: Path) -> list[Path]:
     if not ids:
         return out
     for sc, pr in scene_protocols(res, ids):
-        sids = [r for r in ids if res.runs.at[r, "scene"] == sc and same(res.runs.at[r, "protocol"], pr)
-                and res.runs.at[r, "status"] == "done"]
+        sids = runs_of(res, ids, sc, pr, done_only=True)
         metrics = [m for m in NOISE_METRICS if res.resolve(m, pr) and
                    any(math.isfinite(res.value(r, res.resolve(m, pr))) for r in sids)]
         if not metrics:
@@ -355,8 +354,7 @@ def plot_latent(res: Results, path_prefix: Path) -> list[Path]:
     if not ids:
         return out
     for sc, pr in scene_protocols(res, ids):
-        sids = [r for r in ids if res.runs.at[r, "scene"] == sc and same(res.runs.at[r, "protocol"], pr)
-                and res.runs.at[r, "status"] == "done"]
+        sids = runs_of(res, ids, sc, pr, done_only=True)
         gids = [r for r in sids if res.runs.at[r, "method"] == "gaussiands" and _get(res, r, AX_LATENT) is not None]
         if not gids:
             continue

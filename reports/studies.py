@@ -46,6 +46,12 @@ def scene_protocols(res: Results, ids: list[str]) -> list[tuple[str, Any]]:
     return sorted(pairs, key=lambda t: (_protocol_rank(t[1]), str(t[0])))
 
 
+def runs_of(res: Results, ids: list[str], scene: str, protocol: Any, done_only: bool = False) -> list[str]:
+    """The runs among `ids` of one (scene, protocol) pair (optionally only finished ones)."""
+    return [r for r in ids if res.runs.at[r, "scene"] == scene and same(res.runs.at[r, "protocol"], protocol)
+            and (not done_only or res.runs.at[r, "status"] == "done")]
+
+
 def _spec_for(metric: str) -> MetricSpec:
     return metric_spec(metric)
 
@@ -254,7 +260,7 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
     group_cols: list[tuple[str, Any, str]] = []  # (scene, protocol, concrete metric)
     dropped = []
     for sc, pr in pairs:
-        sids = [r for r in ids if res.runs.at[r, "scene"] == sc and same(res.runs.at[r, "protocol"], pr)]
+        sids = runs_of(res, ids, sc, pr)
         for m in metrics:
             concrete = res.resolve(m, pr)
             if concrete is None or not res.has_metric(sids, concrete):
@@ -398,7 +404,7 @@ def latent_dim_tables(res: Results) -> list[Table]:
         return []
     tables = []
     for sc, pr in scene_protocols(res, ids):
-        sids = [r for r in ids if res.runs.at[r, "scene"] == sc and same(res.runs.at[r, "protocol"], pr)]
+        sids = runs_of(res, ids, sc, pr)
         cols: list[tuple[str, Any]] = []  # (method, d)
         for rid in sids:
             meth = res.runs.at[rid, "method"]
