@@ -523,13 +523,20 @@ def plan(grid: Grid, runs_dir: Path, create_scenes: bool = True) -> list[Planned
 
 # ----------------------------------------------------------------------------- status
 def pid_alive(pid: int) -> bool:
+    """True when `pid` is a live process. A zombie (killed, not yet reaped: workers of a killed
+    grid are re-parented to an init that may never reap them) counts as dead."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return True   # no /proc (not Linux): trust kill(0)
+    # the state letter follows the parenthesised command name, which may itself contain spaces
+    return stat[stat.rfind(")") + 2:][:1] not in ("Z", "X")
 
 
 def read_cell_status(run_dir: Path) -> dict:

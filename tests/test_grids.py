@@ -207,3 +207,23 @@ def test_failed_cell_writes_failed_results_and_stays_failed(tmp_path, monkeypatc
     assert len(psnr) == 1 and math.isnan(psnr["value"].iloc[0])
     assert psnr["status"].iloc[0] == "failed" and psnr["reason"].iloc[0] == "run failed"
     assert psnr["axis.train.lambda_dssim"].iloc[0] == 0.2
+
+
+def test_pid_alive_counts_a_killed_unreaped_worker_as_dead():
+    """Workers of a SIGKILLed grid can linger as zombies (nobody reaps them): they must read as
+    dead so that a re-run resumes their cells instead of waiting for a fresh heartbeat."""
+    import signal
+    import subprocess
+    import time
+
+    from gsbench.grids import pid_alive
+
+    p = subprocess.Popen(["sleep", "30"])
+    try:
+        assert pid_alive(p.pid)
+        os.kill(p.pid, signal.SIGKILL)
+        time.sleep(0.3)   # dead but not reaped: a zombie
+        assert not pid_alive(p.pid)
+    finally:
+        p.kill()
+        p.wait()
