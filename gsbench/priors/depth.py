@@ -30,6 +30,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from gsbench.errors import InputError
+from gsbench.priors.weights import require_weights
 from gsbench.priors import warp as W
 
 DEPTH_PROVIDERS = ("gt", "sparse", "depth-anything", "none")
@@ -97,11 +98,8 @@ class DepthAnything:
     """Depth Anything (transformers) from a local folder; relative disparity output."""
 
     def __init__(self, model_path: str | None, device: str | None = None):
-        need = "(Depth Anything weights are needed for --set priors.depth.provider=depth-anything)"
-        if not model_path:
-            raise InputError(f"priors.depth.model_path: not set {need}")
-        if not Path(model_path).is_dir():
-            raise InputError(f"priors.depth.model_path: {model_path} not found {need}")
+        require_weights("priors.depth.model_path", model_path, "Depth Anything",
+                        "priors.depth.provider=depth-anything", folder=True)
         try:
             import torch
             from transformers import AutoImageProcessor, AutoModelForDepthEstimation
@@ -113,7 +111,8 @@ class DepthAnything:
             self.model = AutoModelForDepthEstimation.from_pretrained(model_path, local_files_only=True)
         except (OSError, ValueError) as e:
             raise InputError(f"priors.depth.model_path: {model_path} is not a loadable Depth Anything "
-                             f"folder {need}: {e}") from None
+                             f"folder (Depth Anything weights are needed for --set "
+                             f"priors.depth.provider=depth-anything): {e}") from None
         device = device or ("cuda" if torch.cuda.is_available() else "cpu")
         self.model = self.model.to(device).float().eval()
         self.device = device

@@ -20,6 +20,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from gsbench.errors import InputError
+from gsbench.priors.weights import require_weights
 
 FEATURE_DIM = 512
 CANONICAL_NEGATIVES = ("object", "things", "stuff", "texture")
@@ -152,11 +153,8 @@ class OpenClipFeatures(FeatureProvider):
     needs_image = True
 
     def __init__(self, checkpoint: str | None, model: str = "ViT-B-16", batch_size: int = 32):
-        need = "(OpenCLIP ViT-B/16 weights are needed for --set priors.features.provider=openclip)"
-        if not checkpoint:
-            raise InputError(f"priors.features.checkpoint: not set {need}")
-        if not Path(checkpoint).is_file():
-            raise InputError(f"priors.features.checkpoint: {checkpoint} not found {need}")
+        require_weights("priors.features.checkpoint", checkpoint, "OpenCLIP ViT-B/16",
+                        "priors.features.provider=openclip")
         try:
             import open_clip
             import torch

@@ -29,6 +29,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from gsbench.errors import InputError
+from gsbench.priors.weights import require_weights
 
 JITTER_PER_SEVERITY = 0.006
 MERGE_PER_SEVERITY = 0.04
@@ -144,11 +145,7 @@ class Sam2Masks:
     def __init__(self, masks_cfg: Mapping, device: str | None = None):
         ckpt = masks_cfg.get("checkpoint")
         model_cfg = masks_cfg.get("model_config")
-        need = "(SAM2 weights are needed for --set priors.masks.provider=sam2)"
-        if not ckpt:
-            raise InputError(f"priors.masks.checkpoint: not set {need}")
-        if not Path(ckpt).is_file():
-            raise InputError(f"priors.masks.checkpoint: {ckpt} not found {need}")
+        require_weights("priors.masks.checkpoint", ckpt, "SAM2", "priors.masks.provider=sam2")
         if not model_cfg:
             raise InputError("priors.masks.model_config: not set (the SAM2 model config name matching "
                              "the checkpoint, e.g. configs/sam2.1/sam2.1_hiera_t.yaml)")
