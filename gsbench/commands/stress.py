@@ -1,4 +1,4 @@
-"""`gsbench stress`: the numerical stress battery (see gsbench/stress.py)."""
+"""`gsbench stress`: the numerical stress battery (see the gsbench/stress package)."""
 from __future__ import annotations
 
 import argparse
