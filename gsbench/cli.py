@@ -16,6 +16,7 @@ COMMANDS = {
     "collect": ("collect", "gather every results.json under a folder into one table"),
     "report": ("report", "write tables, plots and a static HTML report from collected results"),
     "stress": ("stress", "run the numerical stress battery against float64 references"),
+    "points": ("points", "triangulate sparse points from known poses (SIFT + pycolmap) into sparse/0"),
 }
 
 

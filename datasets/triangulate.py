@@ -1,0 +1,112 @@
+"""Sparse points for scenes that have poses but no points (LLFF / NeRF captures, generated scenes).
+
+Training initialises from sparse points where a scene has them; without them it falls back to
+random points. This module recovers points the way COLMAP's `point_triangulator` does: SIFT
+features of the training views, exhaustive matching with geometric verification, then
+triangulation from the KNOWN poses (no pose is estimated or refined). All of it runs in pycolmap
+on the CPU. Only training views are used, so no held-out view informs the initialisation.
+"""
+from __future__ import annotations
+
+import logging
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gsbench.errors import InputError
+from gsbench.scene import Camera
+
+from .base import Scene
+from .colmap import write_colmap
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Triangulation:
+    """Triangulated points with their observations (for the reprojection check) and provenance."""
+
+    points: np.ndarray                 # (M, 3) world coordinates
+    colors: np.ndarray                 # (M, 3) in [0, 1]
+    observations: list[list[tuple[int, np.ndarray]]]  # per point: (camera index, observed pixel xy)
+    views: list[int]                   # camera indices the features came from
+    meta: dict = field(default_factory=dict)
+
+    def reprojection_errors(self, cameras: list[Camera]) -> np.ndarray:
+        """Pixel distance between each observation and its point projected by OUR camera model.
+
+        Computed here rather than read from COLMAP so that it also checks that the two agree on
+        pose and pixel conventions."""
+        errs = []
+        for p, obs in zip(self.points, self.observations):
+            for ci, xy in obs:
+                uv, z = cameras[ci].project(p[None])
+                errs.append(float(np.linalg.norm(uv[0] - xy)) if z[0] > 0 else np.inf)
+        return np.asarray(errs, dtype=np.float64)
+
+
+def _image_dir(scene: Scene, views: list[int]) -> Path:
+    """The one folder holding the views' images (pycolmap reads images by name relative to it)."""
+    dirs = {Path(scene.image_paths[i]).parent for i in views}
+    if len(dirs) != 1:
+        raise InputError(f"{scene.path}: the training images lie in {len(dirs)} folders; one is needed")
+    return dirs.pop()
+
+
+def triangulate_scene(scene: Scene, views: list[int] | None = None, seed: int = 0) -> Triangulation:
+    """SIFT + exhaustive matching + triangulation from the scene's poses, on `views` (default: train views)."""
+    import pycolmap
+
+    views = list(scene.train_ids if views is None else views)
+    if len(views) < 2:
+        raise InputError(f"{scene.path}: triangulation needs at least two posed training views, the scene has "
+                         f"{len(views)}")
+    img_dir = _image_dir(scene, views)
+    names = [Path(scene.image_paths[i]).name for i in views]
+    cams = [scene.cameras[i] for i in views]
+    with tempfile.TemporaryDirectory(prefix="gsbench-points-") as tmp:
+        tmp = Path(tmp)
+        write_colmap(tmp / "posed", cams, names)  # the known poses, no points
+        rec = pycolmap.Reconstruction(str(tmp / "posed"))
+        db_path = tmp / "database.db"
+        # The database must carry the model's ids, so that matches refer to the posed images.
+        with pycolmap.Database.open(str(db_path)) as db:
+            for cam in rec.cameras.values():
+                db.write_camera(cam, use_camera_id=True)
+            for rig in rec.rigs.values():
+                db.write_rig(rig, use_rig_id=True)
+            for frame in rec.frames.values():
+                db.write_frame(frame, use_frame_id=True)
+            for im in rec.images.values():
+                db.write_image(im, use_image_id=True)
+        cpu = pycolmap.Device.cpu
+        pycolmap.extract_features(db_path, img_dir, image_names=names, device=cpu)
+        pycolmap.match_exhaustive(db_path, device=cpu)
+        with pycolmap.Database.open(str(db_path)) as db:
+            n_kp, n_pairs = int(db.num_keypoints()), int(db.num_verified_image_pairs())
+        options = pycolmap.IncrementalPipelineOptions()
+        options.triangulation.random_seed = seed
+        (tmp / "out").mkdir()
+        out = pycolmap.triangulate_points(rec, db_path, img_dir, tmp / "out", clear_points=True, options=options)
+    view_of = {im_id: views[names.index(im.name)] for im_id, im in out.images.items()}
+    pts, cols, obs = [], [], []
+    for _, p3d in sorted(out.points3D.items()):
+        pts.append(np.asarray(p3d.xyz, dtype=np.float64))
+        cols.append(np.asarray(p3d.color, dtype=np.float64) / 255.0)
+        obs.append([(view_of[e.image_id], np.asarray(out.images[e.image_id].points2D[e.point2D_idx].xy, np.float64))
+                    for e in p3d.track.elements])
+    meta = {"source": "pycolmap SIFT + exhaustive matching + triangulate_points (known poses, CPU)",
+            "pycolmap": str(pycolmap.__version__), "views": len(views), "keypoints": n_kp,
+            "verified_pairs": n_pairs, "seed": seed}
+    log.info("triangulated %d points from %d views (%d keypoints, %d verified pairs)", len(pts), len(views), n_kp,
+             n_pairs)
+    return Triangulation(np.reshape(np.asarray(pts), (-1, 3)), np.reshape(np.asarray(cols), (-1, 3)), obs, views,
+                         meta)
+
+
+def write_points(scene: Scene, tri: Triangulation, model_dir: Path) -> None:
+    """A COLMAP model with every camera of the scene (train and test) and the triangulated points."""
+    names = [Path(p).name for p in scene.image_paths]
+    write_colmap(model_dir, scene.cameras, names, tri.points, tri.colors)
