@@ -6,27 +6,35 @@ VENV := .venv
 VPY := $(VENV)/bin/python
 DEMO := demo_out
 PYTEST_ARGS ?=
+# pip runs only when this stamp is older than pyproject.toml (the install is editable, so code
+# changes need no reinstall).
+STAMP := $(VENV)/.installed
 
-.PHONY: demo test install venv clean stress bench
+.PHONY: demo test install lint clean stress bench
 
 $(VPY):
 	$(PY) -m venv $(VENV)
 
 # torch: use the CPU build of 2.13.0 from this machine's disk unless a torch is already importable.
-venv: $(VPY)
+# pip's build warnings go to .venv/install.log; it is printed only when the install fails.
+$(STAMP): pyproject.toml | $(VPY)
 	@$(VPY) -c "import torch" 2>/dev/null || (echo "installing torch==2.13.0 (CPU)"; \
 	  $(VPY) -m pip install --quiet torch==2.13.0 > $(VENV)/torch-install.log 2>&1 || (cat $(VENV)/torch-install.log; exit 1))
-
-# pip's build warnings go to .venv/install.log; it is printed only when the install fails.
-install: venv
 	@echo "installing gsbench[test] into $(VENV) (log: $(VENV)/install.log)"
 	@$(VPY) -m pip install --quiet -e ".[test]" > $(VENV)/install.log 2>&1 || (cat $(VENV)/install.log; exit 1)
+	@touch $@
+
+install: $(STAMP)
 
 demo: install
 	bash scripts/demo.sh $(VENV) $(DEMO)
 
 test: install
 	$(VPY) -m pytest -q $(PYTEST_ARGS)
+
+# ruff's rules and line length are set in pyproject.toml ([tool.ruff]).
+lint: install
+	$(VENV)/bin/ruff check .
 
 stress: install
 	$(VENV)/bin/gsbench stress --out $(DEMO)/stress

@@ -9,6 +9,7 @@ on the CPU. Only training views are used, so no held-out view informs the initia
 from __future__ import annotations
 
 import logging
+import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -82,7 +83,9 @@ def triangulate_scene(scene: Scene, views: list[int] | None = None, seed: int = 
             for im in rec.images.values():
                 db.write_image(im, use_image_id=True)
         cpu = pycolmap.Device.cpu
-        pycolmap.extract_features(db_path, img_dir, image_names=names, device=cpu)
+        extraction = pycolmap.FeatureExtractionOptions()
+        extraction.num_threads = min(4, os.cpu_count() or 1)  # -1 (all cores) warns about RAM per thread
+        pycolmap.extract_features(db_path, img_dir, image_names=names, extraction_options=extraction, device=cpu)
         pycolmap.match_exhaustive(db_path, device=cpu)
         with pycolmap.Database.open(str(db_path)) as db:
             n_kp, n_pairs = int(db.num_keypoints()), int(db.num_verified_image_pairs())

@@ -16,14 +16,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import numpy as np
+    import pycolmap
 
     from gsbench.datasets import load_scene
     from gsbench.datasets.colmap import find_model_dir
     from gsbench.datasets.triangulate import triangulate_scene, write_points
     from gsbench.errors import InputError
     from gsbench.store import write_json_atomic
-
-    import pycolmap
 
     pycolmap.logging.minloglevel = pycolmap.logging.WARNING  # COLMAP's per-image INFO lines would bury the summary
     scene = load_scene(args.scene, layout=args.layout)

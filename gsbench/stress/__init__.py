@@ -6,26 +6,30 @@ finite. One row per case: component, case, max abs / relative error, finite outp
 gradients, pass/fail. Components whose code is absent from this build are listed as failed rows
 with the reason, never as passed.
 
-core.py holds the types, comparisons and registry; the cases_*.py modules register their cases
-in import order (which is the order of the table).
+core.py holds the types, comparisons and the runner; each cases_*.py module builds the cases of
+one part. The loader list below fixes the order of the table.
 """
 from __future__ import annotations
 
-from typing import Optional
+from typing import Callable, Optional
 
-from gsbench.stress.core import (_EXTRA_CASE_LOADERS, Case, CaseResult, _result, all_finite, compare, run_case,
-                                 scaled_err)
-from gsbench.stress.cases_render import available_backends, render_cases
-from gsbench.stress import cases_depth, cases_losses, cases_metrics  # noqa: F401  (import registers the cases)
+from gsbench.stress.cases_depth import depth_solve_cases
+from gsbench.stress.cases_losses import autoencoder_cases, loss_cases, stiff_lambda_cases
+from gsbench.stress.cases_metrics import metric_cases
+from gsbench.stress.cases_render import available_backends, projection_cases, render_cases
+from gsbench.stress.core import Case, CaseResult, _result, all_finite, compare, run_case, scaled_err
 
 __all__ = ["Case", "CaseResult", "all_cases", "all_finite", "available_backends", "compare", "run_case",
-           "scaled_err", "_result", "_EXTRA_CASE_LOADERS"]
+           "scaled_err", "_result"]
+
+# Loaders import their component inside, so that a component absent from a build becomes a failed row.
+_EXTRA_CASE_LOADERS: list[Callable[[], list[Case]]] = [
+    projection_cases, depth_solve_cases, loss_cases, stiff_lambda_cases, autoencoder_cases, metric_cases,
+]
 
 
 def all_cases(components: Optional[list[str]] = None) -> tuple[list[Case], list[CaseResult]]:
-    """Every case of this build, plus failed rows for components whose code is absent.
-
-    Reads the registry through this package's name so that a test can extend it with monkeypatch."""
+    """Every case of this build (render cases per backend first), plus failed rows for absent components."""
     cases = render_cases(available_backends())
     skipped: list[CaseResult] = []
     for loader in _EXTRA_CASE_LOADERS:

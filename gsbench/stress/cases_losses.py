@@ -8,8 +8,18 @@ import numpy as np
 import torch
 
 from gsbench.gaussians import GaussianField
-from gsbench.stress.core import (Case, CaseResult, _camera, _depth_pair, _field, _grads, _images, _leaf, _result,
-                                 all_finite, register)
+from gsbench.stress.core import (
+    Case,
+    CaseResult,
+    _camera,
+    _depth_pair,
+    _field,
+    _grads,
+    _images,
+    _leaf,
+    _result,
+    all_finite,
+)
 
 
 def _loss_case(comp: str, fn: Callable[..., Optional[torch.Tensor]], inputs: list, grad_mask: list[bool],
@@ -19,7 +29,8 @@ def _loss_case(comp: str, fn: Callable[..., Optional[torch.Tensor]], inputs: lis
     res = {}
     for dt in (torch.float32, torch.float64):
         xs = [(_leaf(x, dt) if g else torch.as_tensor(np.asarray(x))) for x, g in zip(inputs, grad_mask)]
-        xs = [x.to(dt) if (isinstance(x, torch.Tensor) and x.is_floating_point() and not x.requires_grad) else x for x in xs]
+        xs = [x.to(dt) if (isinstance(x, torch.Tensor) and x.is_floating_point() and not x.requires_grad) else x
+              for x in xs]
         out = fn(*xs)
         if out is None:
             res[dt] = (None, None)
@@ -28,7 +39,8 @@ def _loss_case(comp: str, fn: Callable[..., Optional[torch.Tensor]], inputs: lis
         res[dt] = ([out], _grads(out, leaves))
     (o32, g32), (o64, g64) = res[torch.float32], res[torch.float64]
     if o32 is None or o64 is None:
-        return CaseResult(comp, "", passed=False, note=f"loss returned None (float32 {o32 is None}, float64 {o64 is None})")
+        return CaseResult(comp, "", passed=False,
+                          note=f"loss returned None (float32 {o32 is None}, float64 {o64 is None})")
     extra_ok = True
     if expect is not None:
         v = float(o64[0].detach())
@@ -37,11 +49,17 @@ def _loss_case(comp: str, fn: Callable[..., Optional[torch.Tensor]], inputs: lis
     return _result(comp, o32, o64, g32, g64, out_tol, grad_tol, note=note, extra_ok=extra_ok)
 
 
-@register
 def loss_cases() -> list[Case]:
     """Each training loss in float32 vs float64 on regular and extreme inputs (gradients included)."""
-    from gsbench.methods.losses import (DEPTH_FORMULATIONS, depth_edges, depth_loss, ds_loss, reconstruction_loss,
-                                        sem_loss, tv_loss)
+    from gsbench.methods.losses import (
+        DEPTH_FORMULATIONS,
+        depth_edges,
+        depth_loss,
+        ds_loss,
+        reconstruction_loss,
+        sem_loss,
+        tv_loss,
+    )
 
     cases: list[Case] = []
 
@@ -76,7 +94,8 @@ def loss_cases() -> list[Case]:
         zero_d[:4] = 0.0          # no surface rendered there (1/D guarded, not used)
         add("loss:depth", f"{form}, disparity prior, zero rendered depth rows",
             lambda f=form, zd=zero_d: _loss_case(
-                "loss:depth", lambda d, f=f: depth_loss(f, d, (1.0 / prior).astype(np.float32), valid, "disparity").loss,
+                "loss:depth",
+                lambda d, f=f: depth_loss(f, d, (1.0 / prior).astype(np.float32), valid, "disparity").loss,
                 [zd], [True], out_tol=1e-3 if f == "pearson" else 1e-4, grad_tol=1e-3,
                 note="pearson: 1 - corr cancels in float32 when corr ~ 1" if f == "pearson" else ""))
 
@@ -113,7 +132,8 @@ def loss_cases() -> list[Case]:
 
     add("loss:sem", "partial targets", lambda: _loss_case("loss:sem", sem_fn(has), [s_hat, s_tgt], [True, False],
                                                          expect=sem_ref, note="mean |S_hat - S| over target pixels"))
-    add("loss:sem", "huge latents (1e6)", lambda: _loss_case("loss:sem", sem_fn(has), [s_hat * 1e6, s_tgt], [True, False]))
+    add("loss:sem", "huge latents (1e6)",
+        lambda: _loss_case("loss:sem", sem_fn(has), [s_hat * 1e6, s_tgt], [True, False]))
 
     def no_target() -> CaseResult:
         out = sem_loss(torch.as_tensor(s_hat), torch.as_tensor(s_tgt), torch.as_tensor(empty))
@@ -125,8 +145,8 @@ def loss_cases() -> list[Case]:
     add("loss:sem", "no pixel has a target", no_target)
     add("loss:ds", "empty edge map", lambda: _loss_case("loss:ds", ds_fn(empty), [s_hat, s_tgt], [True, False],
                                                        expect=0.0, expect_tol=1e-12, note="zero loss, zero gradient"))
-    add("loss:ds", "full edge map (equals L_sem)", lambda: _loss_case("loss:ds", ds_fn(full), [s_hat, s_tgt], [True, False],
-                                                                     expect=sem_ref))
+    add("loss:ds", "full edge map (equals L_sem)",
+        lambda: _loss_case("loss:ds", ds_fn(full), [s_hat, s_tgt], [True, False], expect=sem_ref))
 
     def edges_case(values, valid_m, expect_empty: bool, what: str) -> Callable[[], CaseResult]:
         def run() -> CaseResult:
@@ -136,7 +156,8 @@ def loss_cases() -> list[Case]:
                          torch.as_tensor(has), torch.as_tensor(e))
             fin = ds is not None and all_finite(ds)
             return CaseResult("loss:ds", "", finite_out=fin, passed=bool(ok and fin),
-                              note=f"E_d on {what}: {int(e.sum())} edge pixels (expected {'none' if expect_empty else 'some'})")
+                              note=f"E_d on {what}: {int(e.sum())} edge pixels "
+                                   f"(expected {'none' if expect_empty else 'some'})")
         return run
 
     add("loss:ds", "edges of a constant prior", edges_case(np.full((24, 32), 5.0), full, True, "a constant prior"))
@@ -164,7 +185,6 @@ def loss_cases() -> list[Case]:
 
 
 # ---------------------------------------------------------------------------- stiff loss weights
-@register
 def stiff_lambda_cases() -> list[Case]:
     """The GaussianDS total loss on a real render with lambdas spanning 1e-4..1e4: finite and float32 ~ float64."""
     from gsbench.methods.losses import depth_edges, depth_loss, ds_loss, reconstruction_loss, sem_loss, tv_loss
@@ -220,7 +240,6 @@ def stiff_lambda_cases() -> list[Case]:
 
 
 # ---------------------------------------------------------------------------- autoencoder
-@register
 def autoencoder_cases() -> list[Case]:
     """The frozen feature autoencoder: finite, unit-norm latents and reconstructions, float32 ~ float64."""
     from gsbench.methods.autoencoder import FeatureAutoencoder

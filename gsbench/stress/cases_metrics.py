@@ -6,18 +6,18 @@ from typing import Callable
 
 import numpy as np
 
-from gsbench.stress.core import Case, CaseResult, _result, all_finite, register
+from gsbench.stress.core import Case, CaseResult, _result, all_finite
 
 
-@register
 def metric_cases() -> list[Case]:
     """Metrics on degenerate inputs: hand-computed values, defined behaviour for tiny images, float32 ~ float64."""
-    from gsbench.errors import InputError
     from gsbench import metrics as M
+    from gsbench.errors import InputError
 
     comp = "metrics"
 
-    def value_case(fn: Callable[[], float], expect: float, tol: float = 1e-9, what: str = "") -> Callable[[], CaseResult]:
+    def value_case(fn: Callable[[], float], expect: float, tol: float = 1e-9,
+                   what: str = "") -> Callable[[], CaseResult]:
         def run() -> CaseResult:
             v = fn()
             r = CaseResult(comp, "")
@@ -39,7 +39,8 @@ def metric_cases() -> list[Case]:
                               note=f"expected InputError ({what}), got {v!r}")
         return run
 
-    def prec_case(fn: Callable[[np.ndarray, np.ndarray], float], a: np.ndarray, b: np.ndarray, tol: float) -> Callable[[], CaseResult]:
+    def prec_case(fn: Callable[[np.ndarray, np.ndarray], float], a: np.ndarray, b: np.ndarray,
+                  tol: float) -> Callable[[], CaseResult]:
         def run() -> CaseResult:
             v32 = fn(a.astype(np.float32), b.astype(np.float32))
             v64 = fn(a.astype(np.float64), b.astype(np.float64))
@@ -54,18 +55,21 @@ def metric_cases() -> list[Case]:
     o = np.ones((12, 12), bool)
     one = np.ones((1, 1), bool)
     cases = [
-        Case(comp, "psnr identical images (100 dB cap)", value_case(lambda: M.psnr(c5, c5), 100.0, what="MSE 0 -> cap")),
+        Case(comp, "psnr identical images (100 dB cap)",
+             value_case(lambda: M.psnr(c5, c5), 100.0, what="MSE 0 -> cap")),
         Case(comp, "psnr identical, not quantised", value_case(lambda: M.psnr(img_a, img_a, quantize=False), 100.0)),
         Case(comp, "psnr constant images 0.5 vs 0", value_case(lambda: M.psnr(c5, np.zeros_like(c5)),
                                                                -10 * math.log10(q * q), 1e-9, "uint8 128/255")),
         Case(comp, "psnr 1x1 images", value_case(lambda: M.psnr(np.full((1, 1, 3), 1.0), np.zeros((1, 1, 3))), 0.0)),
         Case(comp, "psnr float32 vs float64", prec_case(lambda a, b: M.psnr(a, b, quantize=False), img_a, img_b, 1e-5)),
-        Case(comp, "ssim identical constant images", value_case(lambda: M.ssim(np.full((16, 16, 3), 0.3), np.full((16, 16, 3), 0.3)),
-                                                                1.0, 1e-9, "(2mu^2+C1)/(2mu^2+C1) = 1")),
+        Case(comp, "ssim identical constant images", value_case(
+            lambda: M.ssim(np.full((16, 16, 3), 0.3), np.full((16, 16, 3), 0.3)), 1.0, 1e-9,
+            "(2mu^2+C1)/(2mu^2+C1) = 1")),
         Case(comp, "ssim constant 0.5 vs 0 (valid)", value_case(
-            lambda: M.ssim(c5, np.zeros_like(c5)), (0.01 ** 2) / (0.25 + 0.01 ** 2), 1e-6, "C1 / (mu^2 + C1), sigma = 0")),
-        Case(comp, "ssim 1x1 images (valid border)", raises_case(lambda: M.ssim(np.full((1, 1, 3), .3), np.full((1, 1, 3), .3)),
-                                                                 "valid border needs >= 11x11")),
+            lambda: M.ssim(c5, np.zeros_like(c5)), (0.01 ** 2) / (0.25 + 0.01 ** 2), 1e-6,
+            "C1 / (mu^2 + C1), sigma = 0")),
+        Case(comp, "ssim 1x1 images (valid border)", raises_case(
+            lambda: M.ssim(np.full((1, 1, 3), .3), np.full((1, 1, 3), .3)), "valid border needs >= 11x11")),
         Case(comp, "ssim 1x1 identical (zeropad border)", value_case(
             lambda: M.ssim(np.full((1, 1, 3), .3), np.full((1, 1, 3), .3), border="zeropad"), 1.0, 1e-9)),
         Case(comp, "ssim float32 vs float64", prec_case(lambda a, b: M.ssim(a, b), img_a, img_b, 1e-5)),
@@ -98,7 +102,8 @@ def metric_cases() -> list[Case]:
             res.finite_out = all_finite(r)
             res.max_abs = float(np.max(np.abs(r - expect)))
             res.max_rel = res.max_abs / expect
-            res.passed = bool(res.finite_out and r.shape == (6, 5) and res.max_abs <= 1e-6 and float(r.max() - r.min()) == 0.0)
+            res.passed = bool(res.finite_out and r.shape == (6, 5) and res.max_abs <= 1e-6
+                              and float(r.max() - r.min()) == 0.0)
             res.note = (f"constant map {float(r.mean()):.10f} vs hand-computed {expect:.10f} ({what}; "
                         f"cosines in float32 by design, tol 1e-6)")
             return res

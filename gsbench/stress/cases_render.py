@@ -9,8 +9,17 @@ import torch
 
 from gsbench.gaussians import GaussianField
 from gsbench.scene import Camera
-from gsbench.stress.core import (Case, CaseResult, _camera, _field, _grads, _result, _to_np, all_finite, compare,
-                                 register)
+from gsbench.stress.core import (
+    Case,
+    CaseResult,
+    _camera,
+    _field,
+    _grads,
+    _result,
+    _to_np,
+    all_finite,
+    compare,
+)
 
 
 def available_backends() -> list[str]:
@@ -80,8 +89,8 @@ def render_cases(backends: Iterable[str]) -> list[Case]:
     for be in backends:
         comp = "render:" + be
 
-        def add(name, params_fn, cam_fn=_camera, **kw):
-            cases.append(Case(comp, name, lambda be=be, p=params_fn, c=cam_fn, kw=kw: _render_case(be, p(), c(), **kw)))
+        def add(name, params_fn, cam_fn=_camera, comp=comp, be=be, **kw):
+            cases.append(Case(comp, name, lambda p=params_fn, c=cam_fn, kw=kw: _render_case(be, p(), c(), **kw)))
 
         for s in (1e-6, 1e-3, 1.0, 1e3):
             # scale relative to the scene size (spread 0.6 -> size ~1)
@@ -138,7 +147,6 @@ def render_cases(backends: Iterable[str]) -> list[Case]:
 
 
 # ---------------------------------------------------------------------------- projection
-@register
 def projection_cases() -> list[Case]:
     """project_gaussians in float32 against float64: same culling, means2d, 2D covariance, depths, gradients."""
     from gsbench.render.projection import project_gaussians

@@ -1,5 +1,5 @@
 """Shared pieces of the stress battery: case and result types, float32-vs-float64 comparison,
-the case registry, and the small synthetic inputs (camera, Gaussians, images, depth) the cases use.
+running one case, and the small synthetic inputs (camera, Gaussians, images, depth) the cases use.
 """
 from __future__ import annotations
 
@@ -89,7 +89,8 @@ def _field(n: int, seed: int = 0, spread: float = 0.6, log_scale: float = -2.5, 
     means = (torch.rand(n, 3, generator=g, dtype=torch.float64) * 2 - 1) * spread
     return {
         "means": means,
-        "log_scales": torch.full((n, 3), log_scale, dtype=torch.float64) + 0.3 * torch.randn(n, 3, generator=g, dtype=torch.float64),
+        "log_scales": (torch.full((n, 3), log_scale, dtype=torch.float64)
+                       + 0.3 * torch.randn(n, 3, generator=g, dtype=torch.float64)),
         "quats": torch.randn(n, 4, generator=g, dtype=torch.float64),
         "opacity_logits": (torch.randn(n, generator=g, dtype=torch.float64) if opacity_logit is None
                            else torch.full((n,), float(opacity_logit), dtype=torch.float64)),
@@ -118,7 +119,7 @@ def _images(h: int = 24, w: int = 32, seed: int = 0) -> tuple[np.ndarray, np.nda
 
 
 
-# ---------------------------------------------------------------------------- running and registry
+# ---------------------------------------------------------------------------- running
 def run_case(case: Case) -> CaseResult:
     t0 = time.perf_counter()
     try:
@@ -131,14 +132,6 @@ def run_case(case: Case) -> CaseResult:
     r.case = case.name
     r.seconds = time.perf_counter() - t0
     return r
-
-
-_EXTRA_CASE_LOADERS: list[Callable[[], list[Case]]] = []
-
-
-def register(loader: Callable[[], list[Case]]) -> Callable[[], list[Case]]:
-    _EXTRA_CASE_LOADERS.append(loader)
-    return loader
 
 
 # ---------------------------------------------------------------------------- shared helpers of the extra cases
@@ -185,7 +178,8 @@ def _result(component: str, outs32: list, outs64: list, grads32: Optional[list],
 
 
 def _leaf(x, dtype) -> torch.Tensor:
-    return torch.as_tensor(np.asarray(x) if not isinstance(x, torch.Tensor) else x).to(dtype).clone().requires_grad_(True)
+    t = x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x))
+    return t.to(dtype).clone().requires_grad_(True)
 
 
 def _grads(loss: torch.Tensor, leaves: list[torch.Tensor]) -> list[torch.Tensor]:
