@@ -22,19 +22,15 @@ TRAIN_FAST = ["--preset", "cpu-small", "--set", "train.iterations=2", "--set", "
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("scene") / "tabletop"
-    assert main(["make-scene", "--preset", "tabletop-small", "--views", "8", "--resolution", "32x24",
-                 "--out", str(out), "--quiet"]) == 0
-    return out
+def scene(tiny_scene) -> Path:
+    """The session's tiny scene (tests/conftest.py), copied by the tests that corrupt it."""
+    return tiny_scene
 
 
 @pytest.fixture(scope="module")
-def trained_run(scene, tmp_path_factory) -> Path:
-    """A real (2-iteration) vanilla run folder, copied by the tests that corrupt it."""
-    run = tmp_path_factory.mktemp("runs") / "vanilla"
-    assert main(["train", "--method", "vanilla", "--scene", str(scene), "--out", str(run), *TRAIN_FAST]) == 0
-    return run
+def trained_run(tiny_run) -> Path:
+    """The session's real (2-iteration) vanilla run folder, copied by the tests that corrupt it."""
+    return tiny_run
 
 
 def copy_scene(scene: Path, tmp_path: Path) -> Path:

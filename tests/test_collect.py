@@ -14,7 +14,7 @@ from gsbench.collect import (
     BASE_COLUMNS, collect, missing_reason, read_collected, write_collected,
 )
 from gsbench.errors import InputError
-from test_report_synthetic import make_ablations, make_main, write_run
+from tests.test_report_synthetic import make_ablations, make_main, write_run
 
 INTERFACE = BASE_COLUMNS + ["metric", "value", "metric_impl"]
 

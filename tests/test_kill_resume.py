@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -26,11 +27,10 @@ LOG_EVERY = 5
 
 
 @pytest.fixture(scope="module")
-def workspace(tmp_path_factory) -> Path:
-    """A tiny scene; every run of this module lives next to it and shares the priors cache."""
+def workspace(tiny_scene, tmp_path_factory) -> Path:
+    """A copy of the session's tiny scene; every run of this module lives next to it and shares the priors cache."""
     root = tmp_path_factory.mktemp("killresume")
-    subprocess.run([EXE, "make-scene", "--preset", "tabletop-small", "--views", "8", "--resolution", "32x24",
-                    "--out", str(root / "scene"), "--quiet"], check=True, capture_output=True, timeout=300)
+    shutil.copytree(tiny_scene, root / "scene")
     return root
 
 

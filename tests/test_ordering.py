@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import itertools
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,9 +10,7 @@ from gsbench.errors import InputError
 from gsbench.priors import ordering as O
 from gsbench.priors import prepare_priors
 from gsbench.scene import Camera
-
-sys.path.insert(0, str(Path(__file__).parent))
-from test_priors_scene import make_sphere_scene  # noqa: E402
+from tests.test_priors_scene import make_sphere_scene
 
 
 def cams_at(centers, names=None):

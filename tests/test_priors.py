@@ -1,9 +1,6 @@
 """prepare_priors end to end: contract of the returned Priors, cache reuse, progress, input errors."""
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -13,9 +10,7 @@ from gsbench.priors import cache as C
 from gsbench.priors import depth as D
 from gsbench.priors import features as F
 from gsbench.priors import masks as M
-
-sys.path.insert(0, str(Path(__file__).parent))
-from test_priors_scene import make_sphere_scene  # noqa: E402
+from tests.test_priors_scene import make_sphere_scene
 
 CFG = {"ordering": "pose", "depth": {"provider": "gt", "noise": {"type": None, "severity": 0}},
        "masks": {"provider": "simulated", "severity": 1, "propagator": "flow"},
@@ -162,10 +157,8 @@ def test_single_view(scene):
 
 
 @pytest.fixture(scope="module")
-def tiny_scene_dir(tmp_path_factory):
-    synthetic = pytest.importorskip("gsbench.datasets.synthetic")
-    return synthetic.make_scene("tabletop-small", tmp_path_factory.mktemp("cli") / "scene", seed=0, views=4,
-                                resolution=(32, 24))
+def tiny_scene_dir(tiny_scene):
+    return tiny_scene
 
 
 @pytest.mark.parametrize("flag,path,option", [

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import sys
 import types
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,9 +12,7 @@ from gsbench.priors import depth as D
 from gsbench.priors import prepare_priors
 from gsbench.priors import warp as W
 from gsbench.scene import Camera
-
-sys.path.insert(0, str(Path(__file__).parent))
-from test_priors_scene import make_sphere_scene  # noqa: E402
+from tests.test_priors_scene import make_sphere_scene
 
 
 def _affine_fit(x, y):

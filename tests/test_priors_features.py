@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import hashlib
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,9 +9,7 @@ import pytest
 from gsbench.errors import InputError
 from gsbench.priors import CANONICAL_NEGATIVES, get_feature_provider, prepare_priors
 from gsbench.priors import features as F
-
-sys.path.insert(0, str(Path(__file__).parent))
-from test_priors_scene import CLASS_NAMES, make_sphere_scene  # noqa: E402
+from tests.test_priors_scene import CLASS_NAMES, make_sphere_scene
 
 
 def test_name_vectors_unit_stateless_and_distinct():

@@ -1,9 +1,6 @@
 """Masks: simulated per-frame segments, gt masks, propagation (flow / reproject), mask IoU."""
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -11,9 +8,7 @@ from gsbench.errors import InputError
 from gsbench.priors import masks as M
 from gsbench.priors import prepare_priors
 from gsbench.priors import propagation as P
-
-sys.path.insert(0, str(Path(__file__).parent))
-from test_priors_scene import make_sphere_scene  # noqa: E402
+from tests.test_priors_scene import make_sphere_scene
 
 
 def same_partition(a, b):

@@ -17,8 +17,7 @@ from gsbench.render.cpu_backend import rasterize_cpu
 from gsbench.render.projection import Projected, project_gaussians
 from gsbench.render.torch_backend import rasterize_torch
 from gsbench.scene import Camera
-
-from naive_render import naive_render  # tests/ is on sys.path under pytest (rootdir conftest-less import)
+from tests.naive_render import naive_render
 
 PARAMS = ("means", "log_scales", "quats", "opacity_logits", "colors", "features")
 

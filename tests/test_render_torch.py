@@ -18,7 +18,7 @@ from gsbench.gaussians import GaussianField
 from gsbench.render import render, rules
 from gsbench.render import torch_backend
 from gsbench.scene import Camera
-from naive_render import naive_render, sh_basis, threshold_margins
+from tests.naive_render import naive_render, sh_basis, threshold_margins
 
 TOL = 1e-5
 PARAMS = ("means", "log_scales", "quats", "opacity_logits", "colors", "features")
@@ -478,7 +478,7 @@ def test_memory_bounded_256x256_50k_with_gradients():
         import resource, sys, torch
         sys.path.insert(0, sys.argv[1])
         torch.set_num_threads(1)
-        from test_render_torch import random_field, look_at, with_grad
+        from tests.test_render_torch import random_field, look_at, with_grad
         from gsbench.render import render
         field = with_grad(random_field(50_000, 70, d=8, scale=(0.005, 0.05), dtype=torch.float32))
         out = render(field, look_at(256, 256, eye=(0.0, 0.3, 3.0)), backend="torch")
@@ -488,7 +488,8 @@ def test_memory_bounded_256x256_50k_with_gradients():
         print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20)
     """)
     import os
-    res = subprocess.run([sys.executable, "-c", script, os.path.dirname(__file__)], capture_output=True,
+    repo_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # `tests` imports as a package
+    res = subprocess.run([sys.executable, "-c", script, repo_root], capture_output=True,
                          text=True, timeout=900)
     assert res.returncode == 0, res.stderr[-2000:]
     peak_gb = float(res.stdout.strip().splitlines()[-1])   # ru_maxrss is in KiB on Linux

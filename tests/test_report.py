@@ -17,7 +17,7 @@ from gsbench.reports.data import Results
 from gsbench.reports.plots import pareto_front, train_curve
 from gsbench.reports.studies import build_tables, pearson, reconstruction_table
 from gsbench.reports.table import Cell, Column, Row, Table
-from test_report_synthetic import (
+from tests.test_report_synthetic import (
     LAMBDA_DEPTH, LAMBDA_SEM, lambda_miou, make_all, make_main, write_run,
 )
 

@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from gsbench.reports import build_report
-from test_report_synthetic import make_main
+from tests.test_report_synthetic import make_main
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 

@@ -16,9 +16,8 @@ TINY = ["backend=cpu", "train.iterations=30", "train.max_width=32", "train.eval_
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory):
-    from gsbench.datasets.synthetic import make_scene
-    return make_scene("tabletop-small", tmp_path_factory.mktemp("s") / "tabletop", seed=0, views=10, resolution=(32, 24))
+def scene(tiny_scene):
+    return tiny_scene
 
 
 @pytest.fixture(scope="module")

@@ -8,20 +8,16 @@ kinds, ids, cache, crops fed to the model, mask propagation over the ordered fra
 from __future__ import annotations
 
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 pytestmark = pytest.mark.models
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from test_priors_scene import make_sphere_scene  # noqa: E402
-
 from gsbench.errors import InputError  # noqa: E402
-from gsbench.priors import get_feature_provider, prepare_priors  # noqa: E402
 from gsbench.priors import features as F  # noqa: E402
+from gsbench.priors import get_feature_provider, prepare_priors  # noqa: E402
+from tests.test_priors_scene import make_sphere_scene  # noqa: E402
 
 
 # ------------------------------------------------------------------------------ Depth Anything

@@ -1,0 +1,31 @@
+"""Session-wide fixtures: one tiny generated scene and one trained tiny run, built once per test
+session and shared read-only (a test that changes them works on a copy)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gsbench.cli import main
+
+# tabletop-small at 32x24 with 8 views: 7 training views and 1 held-out view (LLFF hold-out of 8).
+TINY_SCENE_ARGS = ["--preset", "tabletop-small", "--views", "8", "--resolution", "32x24", "--seed", "0"]
+# A vanilla run of 2 iterations: a complete run folder in about a second.
+TINY_TRAIN_ARGS = ["--method", "vanilla", "--preset", "cpu-small", "--set", "train.iterations=2",
+                   "--set", "train.eval_every=0", "--no-progress"]
+
+
+@pytest.fixture(scope="session")
+def tiny_scene(tmp_path_factory) -> Path:
+    """A generated scene folder (3D-OVS + LERF layouts, GT depth, sparse points). Do not modify it."""
+    out = tmp_path_factory.mktemp("tiny_scene") / "tabletop"
+    assert main(["make-scene", *TINY_SCENE_ARGS, "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tiny_scene, tmp_path_factory) -> Path:
+    """A finished vanilla run folder trained on `tiny_scene`. Do not modify it."""
+    run = tmp_path_factory.mktemp("tiny_runs") / "vanilla"
+    assert main(["train", *TINY_TRAIN_ARGS, "--scene", str(tiny_scene), "--out", str(run)]) == 0
+    return run
