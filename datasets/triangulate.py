@@ -109,7 +109,17 @@ def triangulate_scene(scene: Scene, views: list[int] | None = None, seed: int = 
                          meta)
 
 
-def write_points(scene: Scene, tri: Triangulation, model_dir: Path) -> None:
-    """A COLMAP model with every camera of the scene (train and test) and the triangulated points."""
+def write_points(scene: Scene, tri: Triangulation, root: Path) -> Path:
+    """`root/sparse/0`: a COLMAP model with every camera of the scene (train and test) and the points.
+
+    A COLMAP model names its images relative to `root/images` (that is where the loader looks), so a
+    scene whose images lie elsewhere is refused rather than left with a model that cannot load."""
+    img_dir = (Path(root) / "images").resolve()
+    outside = [p for p in scene.image_paths if Path(p).resolve().parent != img_dir]
+    if outside:
+        raise InputError(f"{outside[0]}: a COLMAP model needs every image directly in {img_dir} "
+                         f"({len(outside)} images are elsewhere)")
     names = [Path(p).name for p in scene.image_paths]
+    model_dir = Path(root) / "sparse" / "0"
     write_colmap(model_dir, scene.cameras, names, tri.points, tri.colors)
+    return model_dir

@@ -34,8 +34,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"{args.scene}: no point could be triangulated from {len(tri.views)} training views "
                          f"({tri.meta['keypoints']} SIFT keypoints, {tri.meta['verified_pairs']} verified pairs)")
     errs = tri.reprojection_errors(scene.cameras)
-    model_dir = args.scene / "sparse" / "0"
-    write_points(scene, tri, model_dir)
+    model_dir = write_points(scene, tri, args.scene)
     track = np.array([len(o) for o in tri.observations])
     summary = {**tri.meta, "points": len(tri.points), "observations": int(errs.size),
                "mean_track_length": float(track.mean()), "mean_reprojection_error_px": float(np.mean(errs)),
