@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +12,8 @@ import pytest
 from gsbench.cli import main
 from gsbench.datasets import load_scene
 from gsbench.datasets.synthetic import make_scene
-from gsbench.datasets.triangulate import triangulate_scene
+from gsbench.datasets.triangulate import Triangulation, triangulate_scene, write_points
+from gsbench.errors import InputError
 
 
 @pytest.fixture(scope="module")
@@ -92,3 +94,17 @@ def test_scene_without_poses_is_refused(posed_scene, tmp_path, capsys):
     assert main(["points", str(root)]) == 1
     err = capsys.readouterr().err
     assert str(root) in err and "no poses" in err
+
+
+def test_images_outside_the_images_folder_are_refused(posed_scene, tmp_path):
+    """A COLMAP model finds its images in SCENE/images; a model pointing elsewhere would not load."""
+    root = tmp_path / "scene"
+    shutil.copytree(posed_scene, root)
+    scene = load_scene(root)
+    frames = root / "frames"
+    shutil.copytree(root / "images", frames)
+    scene.image_paths = [str(frames / Path(p).name) for p in scene.image_paths]
+    tri = Triangulation(np.zeros((0, 3)), np.zeros((0, 3)), [], list(scene.train_ids))
+    with pytest.raises(InputError, match="frames"):
+        write_points(scene, tri, root)
+    assert not (root / "sparse").exists()
