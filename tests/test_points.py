@@ -47,7 +47,9 @@ def test_points_lie_on_the_surfaces_and_reproject(posed_scene):
     assert all(ci in scene.train_ids for obs in tri.observations for ci, _ in obs)  # no held-out view used
     assert all(len(obs) >= 2 for obs in tri.observations)
     errs = tri.reprojection_errors(scene.cameras)
-    assert np.all(np.isfinite(errs)) and errs.mean() < 1.0 and errs.max() < 5.0
+    # Measured: median 0.36 px, mean 0.59 px. A half-pixel disagreement between COLMAP's pixel
+    # convention and ours would give a median of about 0.8 px, so the median bound catches it.
+    assert np.all(np.isfinite(errs)) and np.median(errs) < 0.5 and errs.mean() < 1.0 and errs.max() < 5.0
     rel = _relative_depth_errors(scene, tri)
     # At 128x96 the triangulation uncertainty is ~1-2 % of depth; points 5 % off along their rays
     # would give a median of ~5 %.

@@ -29,6 +29,9 @@ def run(args: argparse.Namespace) -> int:
     if scene.has_points and not args.force:
         raise InputError(f"{args.scene}: the scene already has {len(scene.points)} sparse points "
                          f"({find_model_dir(args.scene)}); pass --force to replace them")
+    if scene.meta.get("distorted_images"):
+        raise InputError(f"{args.scene}: {scene.meta['distorted_images']} images use a distorted camera model; "
+                         "undistort the scene first (colmap image_undistorter), the points model is pinhole")
     tri = triangulate_scene(scene, seed=args.seed)
     if len(tri.points) == 0:
         raise InputError(f"{args.scene}: no point could be triangulated from {len(tri.views)} training views "
