@@ -5,7 +5,8 @@
     out.info: n_gaussians, n_visible (survived culling), width, height, dtype, device
 
 depth is camera-space z composited like colour (paper Eq. 4: sum_k T_k alpha_k z_k), not divided
-by alpha. Background is added to rgb only: rgb + (1 - alpha) * background.
+by alpha. Background is added to rgb only: rgb + (1 - alpha) * background. Denormals are flushed
+to zero on CPU once per process, by gsbench.startup() (not per call).
 
 Backends:
   torch  - the reference (plain PyTorch, autograd, any device/dtype); gsbench/render/torch_backend.py
@@ -86,8 +87,6 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
     if name == "gsplat":
         from gsbench.render.gsplat_backend import render_gsplat
         return render_gsplat(field, camera, background=background)
-    if device.type == "cpu":
-        torch.set_flush_denormal(True)
     if name == "cpu":
         # fused numba projection + rasterization (gsbench/render/cpu_backend.py); means2d is a leaf
         # whose .grad the backward fills
