@@ -26,7 +26,7 @@ def resolve_render_backend(config: dict) -> str:
         try:
             import gsbench.render.cpu_backend  # noqa: F401
         except ImportError as e:
-            raise ValueError(f"render backend 'cpu' is not available in this build ({e}); use --set backend=torch") from None
+            raise InputError(f"render backend 'cpu' is not available in this build ({e}); use --set backend=torch") from None
     return name
 
 

@@ -22,6 +22,7 @@ from typing import Callable, Optional
 
 import torch
 
+from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.render.projection import Projected, project_gaussians
 from gsbench.scene import Camera
@@ -45,7 +46,7 @@ def resolve_backend(backend: str, device: torch.device) -> str:
     if backend == "auto":
         return "gsplat" if device.type == "cuda" else "cpu"
     if backend not in BACKENDS:
-        raise ValueError(f"unknown render backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
+        raise InputError(f"unknown render backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
     return backend
 
 
