@@ -70,6 +70,15 @@ def configure_logging(quiet: bool = False, verbose: bool = False) -> int:
     return level
 
 
+def apply_global_flags(args: argparse.Namespace) -> argparse.Namespace:
+    """Logging level from --quiet/--verbose; --quiet also turns the command's progress bars off."""
+    quiet = bool(getattr(args, "quiet", False))
+    configure_logging(quiet=quiet, verbose=bool(getattr(args, "verbose", False)))
+    if quiet and hasattr(args, "no_progress"):
+        args.no_progress = True
+    return args
+
+
 def debug_requested(args: argparse.Namespace) -> bool:
     return bool(getattr(args, "debug", False)) or os.environ.get("GSBENCH_DEBUG", "") not in ("", "0")
 
@@ -93,11 +102,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     startup()
     parser = build_parser()
-    args = parser.parse_args(argv)
-    quiet = bool(getattr(args, "quiet", False))
-    configure_logging(quiet=quiet, verbose=bool(getattr(args, "verbose", False)))
-    if quiet and hasattr(args, "no_progress"):
-        args.no_progress = True          # --quiet also means no progress bars
+    args = apply_global_flags(parser.parse_args(argv))
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
