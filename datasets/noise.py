@@ -18,6 +18,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from gsbench.errors import InputError
+
 NOISE_KINDS = ("gaussian", "poisson", "motion_blur", "salt_pepper")
 SEVERITIES = (0, 1, 2, 3, 4, 5)
 LEVELS = {
@@ -44,9 +46,9 @@ def _line_kernel(length: int, angle: float) -> np.ndarray:
 def apply_noise(depth: np.ndarray, valid: np.ndarray, kind: str, severity: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Perturbed depth (same dtype and shape) and its valid mask; severity 0 returns copies."""
     if kind not in NOISE_KINDS:
-        raise ValueError(f"unknown noise kind {kind!r}; choose one of {', '.join(NOISE_KINDS)}")
+        raise InputError(f"unknown noise kind {kind!r}; choose one of {', '.join(NOISE_KINDS)}")
     if int(severity) != severity or severity not in SEVERITIES:
-        raise ValueError(f"noise severity must be one of {SEVERITIES}, got {severity!r}")
+        raise InputError(f"noise severity must be one of {SEVERITIES}, got {severity!r}")
     depth = np.asarray(depth)
     valid = np.asarray(valid, bool)
     if depth.shape != valid.shape or depth.ndim != 2:

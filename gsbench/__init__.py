@@ -1,13 +1,36 @@
 """gsbench: a benchmark and evaluation harness for semantic 3D Gaussian Splatting.
 
-Importing gsbench before torch sets one OpenMP default: GOMP_SPINCOUNT=30000 (unless the
-environment already sets it). PyTorch's OpenMP workers otherwise spin for milliseconds after
-every parallel op and compete with the `cpu` render backend's numba threads for the cores; on a
-2-core machine this made a training step ~1.5x slower while leaving PyTorch's own op timings
-unchanged (measured with benchmarks/render_cpu.py). It has no effect when torch was imported first.
+Process-wide settings are made once, by `startup()`, which `import gsbench` calls (so they hold for
+library use and for the CLI alike, before any gsbench module imports torch):
+
+- GOMP_SPINCOUNT=30000 unless the environment sets it. PyTorch's OpenMP workers otherwise spin for
+  milliseconds after every parallel op and compete with the `cpu` render backend's numba threads for
+  the cores; on a 2-core machine this made a training step ~1.5x slower while leaving PyTorch's own op
+  timings unchanged (measured with benchmarks/render_cpu.py). It has no effect when torch was
+  imported before gsbench.
+- torch.set_flush_denormal(True): denormal floats are flushed to zero on CPU, so the render and
+  trainer never hit the slow denormal path. The flag belongs to the thread that calls startup (the
+  main thread; worker processes call it when they import gsbench).
 """
+import logging as _logging
 import os as _os
 
-_os.environ.setdefault("GOMP_SPINCOUNT", "30000")
-
 __version__ = "0.1.0"
+
+_log = _logging.getLogger(__name__)
+_STARTED = False
+
+
+def startup() -> None:
+    """Make the process-wide settings once; later calls do nothing."""
+    global _STARTED
+    if _STARTED:
+        return
+    _STARTED = True
+    _os.environ.setdefault("GOMP_SPINCOUNT", "30000")
+    import torch
+    torch.set_flush_denormal(True)
+    _log.debug("startup: GOMP_SPINCOUNT=%s, flush denormals on", _os.environ["GOMP_SPINCOUNT"])
+
+
+startup()

@@ -21,7 +21,7 @@ import yaml
 from gsbench.errors import InputError
 
 CONFIG_DIR = Path(__file__).parent / "configs"
-METHODS = ("gaussiands", "vanilla", "twostage")
+from gsbench.methods.registry import METHODS  # noqa: E402  (live: the registered method names)
 # keys that do not change what a run computes (where files go, how often it logs)
 NON_RESULT_KEYS = (("priors", "cache_dir"),)
 
@@ -164,83 +164,11 @@ def run_id(config: dict, scene_fingerprint: str) -> str:
 
 
 # ---------------------------------------------------------------------------- per-scene resolution
-def _depth_source(cfg: dict, scene) -> tuple[bool, str]:
-    prov = cfg["priors"]["depth"]["provider"]
-    if prov in (None, "none"):
-        return False, "priors.depth.provider=none"
-    if prov == "gt" and not scene.has_depth:
-        return False, "priors.depth.provider=gt but the scene has no GT depth"
-    if prov == "sparse" and not scene.has_points:
-        return False, "priors.depth.provider=sparse but the scene has no sparse points"
-    return True, ""
-
-
-def _semantic_source(cfg: dict, scene) -> tuple[bool, str]:
-    m = cfg["priors"]["masks"]["provider"]
-    f = cfg["priors"]["features"]["provider"]
-    if m in ("gt", "simulated") and not scene.has_instances:
-        return False, f"priors.masks.provider={m} needs GT instances and the scene has none (no semantics in the scene)"
-    if f == "text-aligned" and not (scene.has_semantics or (scene.has_instances and scene.instance_classes and scene.class_names)):
-        return False, "priors.features.provider=text-aligned needs GT classes and the scene has none (no semantics in the scene)"
-    return True, ""
-
-
 def resolve_for_scene(config: dict, scene) -> tuple[dict, dict]:
-    """Switch off every loss, prior and output the scene cannot feed or nothing uses; record why.
-
-    Returns (resolved config, dropped {part: reason}); the resolved config also carries `dropped`.
-    """
-    cfg = copy.deepcopy(config)
-    dropped: dict[str, str] = {}
-    method = cfg["method"]
-    g = cfg["gaussiands"]
-    on = g["losses"]
-
-    def drop(part: str, reason: str) -> None:
-        dropped.setdefault(part, reason)
-
-    if method == "vanilla":
-        for k in ("depth", "tv", "sem", "ds"):
-            on[k] = False
-        drop("priors.depth", "method vanilla is RGB only")
-        drop("priors.masks", "method vanilla is RGB only")
-        drop("priors.features", "method vanilla is RGB only")
-        drop("gaussiands.autoencoder", "method vanilla is RGB only")
-        drop("semantic_channels", "method vanilla is RGB only")
-    elif method == "twostage":
-        on["depth"] = on["tv"] = on["ds"] = False
-        drop("priors.depth", "method twostage uses no depth prior (RGB, then semantics on frozen geometry)")
-        drop("gaussiands.losses.depth", "method twostage: RGB + L_sem only")
-        drop("gaussiands.losses.tv", "method twostage: RGB + L_sem only")
-        drop("gaussiands.losses.ds", "method twostage: RGB + L_sem only")
-    # depth prior: can the scene feed it, does anything use it?
-    if method == "gaussiands":
-        if g["depth_formulation"] == "none" and on["depth"]:
-            on["depth"] = False
-            drop("gaussiands.losses.depth", "gaussiands.depth_formulation=none")
-        ok, why = _depth_source(cfg, scene)
-        if not ok:
-            for k in ("depth", "ds"):
-                if on[k]:
-                    on[k] = False
-                    drop(f"gaussiands.losses.{k}", f"no depth prior: {why}")
-            drop("priors.depth", why)
-        elif not (on["depth"] or on["ds"]):
-            drop("priors.depth", "nothing uses it (gaussiands.losses.depth and .ds are off)")
-    # semantics
-    if method in ("gaussiands", "twostage"):
-        ok, why = _semantic_source(cfg, scene)
-        if not ok:
-            for k in ("sem", "ds"):
-                if on[k]:
-                    on[k] = False
-                    drop(f"gaussiands.losses.{k}", why)
-        if not (on["sem"] or on["ds"]):
-            reason = why if not ok else "nothing uses it (gaussiands.losses.sem and .ds are off)"
-            for part in ("priors.masks", "priors.features", "gaussiands.autoencoder", "semantic_channels"):
-                drop(part, reason)
-    cfg["dropped"] = dropped
-    return cfg, dropped
+    """Switch off what the scene cannot feed or nothing uses, as the config's method registered it
+    (gsbench/methods/registry.py). Returns (resolved config, dropped {part: reason})."""
+    from gsbench.methods.registry import resolve_for_scene as resolve
+    return resolve(config, scene)
 
 
 __all__ = ["load_config", "run_id", "resolve_for_scene", "parse_overrides", "validate", "METHODS"]

@@ -22,6 +22,8 @@ from typing import Any, Callable, Optional, Sequence
 
 from tqdm import tqdm
 
+from gsbench.errors import InputError
+
 EXECUTORS = ("local", "submitit", "serial")
 
 
@@ -75,7 +77,7 @@ class LocalExecutor:
 
     def __init__(self, jobs: int = 1, threads: Optional[int] = None, progress: bool = True) -> None:
         if jobs < 1:
-            raise ValueError(f"--jobs must be >= 1, got {jobs}")
+            raise InputError(f"--jobs must be >= 1, got {jobs}")
         self.jobs = jobs
         self.threads = threads if threads is not None else max(1, _cpu_count() // jobs)
         self.progress = progress
@@ -129,7 +131,7 @@ class SubmititExecutor:
         except ImportError:
             raise ImportError("the submitit executor needs `pip install submitit` (extra `cluster`)") from None
         if cluster not in ("slurm", "local", "debug"):
-            raise ValueError(f"submitit cluster must be slurm, local or debug, got {cluster!r}")
+            raise InputError(f"submitit cluster must be slurm, local or debug, got {cluster!r}")
         self.folder = Path(folder)
         self.cluster = cluster
         self.threads = parameters.get("cpus_per_task")
@@ -168,4 +170,4 @@ def make_executor(kind: str, jobs: int = 1, folder: Optional[str | os.PathLike] 
         if cluster == "slurm" and jobs:
             params.setdefault("slurm_array_parallelism", jobs)
         return SubmititExecutor(folder, cluster=cluster, progress=progress, **params)
-    raise ValueError(f"unknown executor {kind!r}; choose one of {', '.join(EXECUTORS)}")
+    raise InputError(f"unknown executor {kind!r}; choose one of {', '.join(EXECUTORS)}")

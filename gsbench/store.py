@@ -54,6 +54,8 @@ from typing import Any
 
 import numpy as np
 
+from gsbench.errors import InputError
+
 RESULTS_VERSION = 1
 
 
@@ -120,18 +122,18 @@ def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
 
 
 def read_json(path: str | os.PathLike) -> Any:
-    """Read JSON; a missing, truncated or corrupt file is a ValueError naming the file."""
+    """Read JSON; a missing, truncated or corrupt file is an InputError naming the file."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise FileNotFoundError(f"{path}: file not found") from None
     except OSError as e:
-        raise ValueError(f"{path}: cannot read ({e.strerror})") from None
+        raise InputError(f"{path}: cannot read ({e.strerror})") from None
     try:
         return json.loads(text)
     except json.JSONDecodeError as e:
-        raise ValueError(f"{path}: corrupt or truncated JSON ({e.msg} at line {e.lineno})") from None
+        raise InputError(f"{path}: corrupt or truncated JSON ({e.msg} at line {e.lineno})") from None
 
 
 def append_jsonl(path: str | os.PathLike, obj: Any) -> None:
@@ -170,7 +172,7 @@ def save_torch_atomic(path: str | os.PathLike, obj: Any) -> None:
 
 
 def load_torch(path: str | os.PathLike) -> Any:
-    """Load a checkpoint; a truncated or corrupt file is a ValueError naming the file."""
+    """Load a checkpoint; a truncated or corrupt file is an InputError naming the file."""
     import torch
     path = Path(path)
     if not path.exists():
@@ -178,4 +180,4 @@ def load_torch(path: str | os.PathLike) -> Any:
     try:
         return torch.load(path, map_location="cpu", weights_only=False)
     except Exception as e:  # torch raises several types for corrupt files
-        raise ValueError(f"{path}: corrupt or truncated checkpoint ({type(e).__name__}: {e})") from None
+        raise InputError(f"{path}: corrupt or truncated checkpoint ({type(e).__name__}: {e})") from None

@@ -1,26 +1,22 @@
-"""gsbench.methods: the Method protocol and the methods behind it (see base.py).
+"""gsbench.methods: the Method protocol (base.py) and the methods behind it.
 
     get_method("gaussiands" | "vanilla" | "twostage") -> Method class
+
+Which methods exist is decided in registry.py (one registration per method); importing this package
+does not import torch: `Method` and the method classes load on first use.
 """
 from __future__ import annotations
 
-from gsbench.methods.base import Method
+from typing import Any
 
-METHODS = ("gaussiands", "vanilla", "twostage")
+from gsbench.methods.registry import METHODS, get_method
 
 
-def get_method(name: str) -> type[Method]:
-    """The Method class registered under `name`."""
-    if name == "gaussiands":
-        from gsbench.methods.gaussiands import GaussianDS
-        return GaussianDS
-    if name == "vanilla":
-        from gsbench.methods.vanilla import Vanilla
-        return Vanilla
-    if name == "twostage":
-        from gsbench.methods.twostage import TwoStage
-        return TwoStage
-    raise ValueError(f"unknown method {name!r}; choose one of {', '.join(METHODS)}")
+def __getattr__(name: str) -> Any:
+    if name == "Method":
+        from gsbench.methods.base import Method
+        return Method
+    raise AttributeError(f"module 'gsbench.methods' has no attribute {name!r}")
 
 
 __all__ = ["Method", "get_method", "METHODS"]

@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 import torch
 
+from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera
@@ -145,7 +146,7 @@ class Method:
     def load(cls, path: str | Path) -> "Method":
         st = load_torch(Path(path))
         if not isinstance(st, dict) or "field" not in st:
-            raise ValueError(f"{path}: not a gsbench model file")
+            raise InputError(f"{path}: not a gsbench model file")
         from gsbench.methods import get_method
         klass = get_method(st["method"]) if cls is Method else cls
         m = klass()
@@ -184,13 +185,13 @@ def load_views(scene, config: dict, progress: bool = False) -> tuple[TrainViews,
     """Train cameras/images at the training resolution, plus the first `eval_views` test views."""
     tcfg = config["train"]
     if not scene.train_ids:
-        raise ValueError(f"{scene.path}: the scene has no training views")
+        raise InputError(f"{scene.path}: the scene has no training views")
     W, H = training_size(scene.cameras[scene.train_ids[0]], tcfg.get("max_width"))
 
     def load(i: int) -> tuple[Camera, torch.Tensor]:
         img = np.asarray(scene.image(i), dtype=np.float32)
         if img.ndim != 3 or img.shape[2] < 3:
-            raise ValueError(f"{scene.image_paths[i] if scene.image_paths else scene.path}: expected an RGB image, got shape {img.shape}")
+            raise InputError(f"{scene.image_paths[i] if scene.image_paths else scene.path}: expected an RGB image, got shape {img.shape}")
         img = img[..., :3]
         if img.shape[1] != W or img.shape[0] != H:
             img = cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA)

@@ -6,7 +6,7 @@ from typing import Callable, Optional
 
 import torch
 
-from gsbench.errors import InputError, NotBuiltError
+from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.render import resolve_backend
 
@@ -14,15 +14,9 @@ from gsbench.methods.trainer import LossResult, Trainer, TrainViews, periodic_ev
 
 
 def uses(config: dict) -> dict:
-    """What the (resolved) config feeds: a depth prior (depth or ds loss) and semantics (sem or ds loss)."""
-    method = config.get("method", "gaussiands")
-    if method == "vanilla":
-        return {"depth_prior": False, "semantics": False}
-    if method == "twostage":
-        return {"depth_prior": False, "semantics": bool(config["gaussiands"]["losses"]["sem"])}
-    on = config["gaussiands"]["losses"]
-    depth_terms = bool(on["depth"] and config["gaussiands"]["depth_formulation"] != "none") or bool(on["ds"])
-    return {"depth_prior": depth_terms, "semantics": bool(on["sem"] or on["ds"])}
+    """What the (resolved) config feeds: {"depth_prior": bool, "semantics": bool}, as its method registered."""
+    from gsbench.methods.registry import get_spec
+    return get_spec(config["method"]).uses(config)
 
 
 def resolve_render_backend(config: dict) -> str:
@@ -32,7 +26,7 @@ def resolve_render_backend(config: dict) -> str:
         try:
             import gsbench.render.cpu_backend  # noqa: F401
         except ImportError as e:
-            raise ValueError(f"render backend 'cpu' is not available in this build ({e}); use --set backend=torch") from None
+            raise InputError(f"render backend 'cpu' is not available in this build ({e}); use --set backend=torch") from None
     return name
 
 
@@ -41,12 +35,17 @@ def cache_dir_for(config: dict, run_dir: Path) -> Path:
     return Path(c) if c else Path(run_dir).resolve().parent / ".gsbench_cache"
 
 
-def fit_priors(scene, config: dict, run_dir: Path, view_ids: list[int], size: tuple[int, int], *,
-               need_depth: bool, need_sem: bool, per_frame: bool, progress: bool):
+def fit_priors(scene, config: dict, run_dir: Path, *, progress: bool):
+    """The priors of fit(): computed from the registry's priors request, the same dict a grid builds
+    to share priors between cells, so the two cannot ask for different cache entries."""
+    from gsbench.methods.registry import build_priors_request
     from gsbench.priors import prepare_priors
-    return prepare_priors(scene, config["priors"], list(view_ids), size, cache_dir_for(config, run_dir),
-                          need_depth=need_depth, need_masks=need_sem, need_features=need_sem,
-                          per_frame_masks=per_frame, seed=int(config["seed"]), progress=progress)
+    req = build_priors_request(config, scene)
+    if req is None:
+        raise InputError(f"{scene.path}: the scene has no training views")
+    return prepare_priors(scene, req["priors"], req["view_ids"], tuple(req["size"]), cache_dir_for(config, run_dir),
+                          need_depth=req["need_depth"], need_masks=req["need_sem"], need_features=req["need_sem"],
+                          per_frame_masks=req["per_frame"], seed=req["seed"], progress=progress)
 
 
 def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Callable[[GaussianField], dict]]:
@@ -67,7 +66,7 @@ def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Ca
             return {}
         try:   # build (and cache) the text encoder once, on the real method
             method.feature_provider()
-        except (InputError, NotBuiltError, ImportError, OSError) as e:
+        except (InputError, ImportError, OSError) as e:
             # e.g. CLIP weights missing while the priors came from the cache: training goes on, and
             # the log says why this entry has no mIoU (gsbench eval will raise the same error)
             return {"miou_skipped": f"text encoder unavailable: {type(e).__name__}: {e}"}

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from gsbench.errors import NonFiniteError
+from gsbench.errors import InputError, NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera
@@ -65,7 +65,7 @@ def init_field(points: Optional[np.ndarray], colors: Optional[np.ndarray], mode:
     rng = np.random.default_rng(seed)
     if mode == "points":
         if points is None or len(points) == 0:
-            raise ValueError("train.init.mode=points but the scene has no sparse points")
+            raise InputError("train.init.mode=points but the scene has no sparse points")
         xyz = np.asarray(points, dtype=np.float64)
         rgb = np.asarray(colors, dtype=np.float64) if colors is not None and len(colors) == len(xyz) else np.full((len(xyz), 3), 0.5)
         how = f"points ({len(xyz)})"

@@ -44,8 +44,7 @@ class TwoStage(Method):
         # ---- stage 2: semantics from per-frame masks on frozen geometry
         g = config["gaussiands"]
         d = int(g["latent_dim"])
-        pri = fit_priors(scene, config, run_dir, train_ids, (W, H), need_depth=False, need_sem=True,
-                         per_frame=True, progress=progress)
+        pri = fit_priors(scene, config, run_dir, progress=progress)
         self.providers = dict(pri.providers)
         self.info["priors_stats"] = dict(pri.stats)
         if pri.masks is None or pri.mask_features is None:

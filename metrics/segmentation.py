@@ -21,6 +21,8 @@ from typing import Any, Iterable
 import cv2
 import numpy as np
 
+from gsbench.errors import InputError
+
 from ._common import as_mask, mean_or_none, same_shape
 
 BOUNDARY_DILATION_RATIO = 0.02
@@ -42,7 +44,7 @@ def iou(pred: Any, gt: Any, *, empty: float = 1.0) -> float:
 def boundary_width(height: int, width: int, dilation_ratio: float = BOUNDARY_DILATION_RATIO) -> int:
     """d = max(1, round(ratio * image diagonal)) pixels."""
     if dilation_ratio < 0 or not math.isfinite(dilation_ratio):
-        raise ValueError(f"dilation_ratio must be a finite number >= 0, got {dilation_ratio}")
+        raise InputError(f"dilation_ratio must be a finite number >= 0, got {dilation_ratio}")
     return max(1, int(round(dilation_ratio * math.sqrt(height ** 2 + width ** 2))))
 
 

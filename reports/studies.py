@@ -32,7 +32,8 @@ def _protocol_rank(p: Any) -> int:
 
 
 def ordered_methods(methods: list) -> list:
-    return sorted(methods, key=lambda m: (METHOD_ORDER.index(m) if m in METHOD_ORDER else len(METHOD_ORDER), str(m)))
+    from gsbench.methods.registry import method_sort_key
+    return sorted(methods, key=method_sort_key)
 
 
 def scene_protocols(res: Results, ids: list[str]) -> list[tuple[str, Any]]:

@@ -14,7 +14,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--views", type=int, default=None, help="number of views (default: the preset's)")
     parser.add_argument("--resolution", default=None, metavar="WxH", help="image size, e.g. 128x96 (default: the preset's)")
     parser.add_argument("--layout", default="both", choices=LAYOUT_CHOICES, help="label layouts to write (default both)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
     res = parse_resolution(args.resolution) if args.resolution else None
     t0 = time.perf_counter()
     out = make_scene(args.preset, args.out, seed=args.seed, views=args.views, resolution=res, layout=args.layout,
-                     progress=not args.quiet)
+                     progress=not args.no_progress)
     scene = load_scene(out)
     parts = ", ".join(k for k, v in scene.parts().items() if v)
     cam = scene.cameras[0]

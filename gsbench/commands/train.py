@@ -6,7 +6,8 @@ from pathlib import Path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--method", required=True, choices=["gaussiands", "vanilla", "twostage"],
+    from gsbench.methods.registry import METHODS
+    parser.add_argument("--method", required=True, choices=METHODS,
                         help="method to train")
     parser.add_argument("--scene", required=True, help="scene folder (any layout gsbench.datasets reads)")
     parser.add_argument("--preset", default=None, help="config preset: cpu-small, paper, or a .yaml path")

@@ -5,7 +5,8 @@
     out.info: n_gaussians, n_visible (survived culling), width, height, dtype, device
 
 depth is camera-space z composited like colour (paper Eq. 4: sum_k T_k alpha_k z_k), not divided
-by alpha. Background is added to rgb only: rgb + (1 - alpha) * background.
+by alpha. Background is added to rgb only: rgb + (1 - alpha) * background. Denormals are flushed
+to zero on CPU once per process, by gsbench.startup() (not per call).
 
 Backends:
   torch  - the reference (plain PyTorch, autograd, any device/dtype); gsbench/render/torch_backend.py
@@ -21,6 +22,7 @@ from typing import Callable, Optional
 
 import torch
 
+from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.render.projection import Projected, project_gaussians
 from gsbench.scene import Camera
@@ -44,7 +46,7 @@ def resolve_backend(backend: str, device: torch.device) -> str:
     if backend == "auto":
         return "gsplat" if device.type == "cuda" else "cpu"
     if backend not in BACKENDS:
-        raise ValueError(f"unknown render backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
+        raise InputError(f"unknown render backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
     return backend
 
 
@@ -86,8 +88,6 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
     if name == "gsplat":
         from gsbench.render.gsplat_backend import render_gsplat
         return render_gsplat(field, camera, background=background)
-    if device.type == "cpu":
-        torch.set_flush_denormal(True)
     if name == "cpu":
         # fused numba projection + rasterization (gsbench/render/cpu_backend.py); means2d is a leaf
         # whose .grad the backward fills

@@ -32,8 +32,7 @@ class GaussianDS(Method):
         use = uses(config)
         views, (W, H) = load_views(scene, config)
         train_ids = sorted(views.cameras)
-        pri = fit_priors(scene, config, run_dir, train_ids, (W, H), need_depth=use["depth_prior"],
-                         need_sem=use["semantics"], per_frame=False, progress=progress)
+        pri = fit_priors(scene, config, run_dir, progress=progress)
         self.providers = dict(pri.providers)
         self.info["priors_stats"] = dict(pri.stats)
         self.info["priors_skipped"] = dict(pri.skipped)

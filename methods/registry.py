@@ -1,0 +1,255 @@
+"""The method registry: the one place that knows which methods exist and what each needs.
+
+A method is registered once with a `MethodSpec`: its name, the class that implements the Method
+protocol (imported only when the method runs, so listing methods stays cheap), its report label,
+its own config section, its resolver (what to switch off when the scene cannot feed it, with
+reasons) and whether its masks are per-frame. Everything that used to repeat this knowledge reads it
+from here: CLI choices, the config's `method` check, the per-scene resolver, the priors request that
+both `fit()` and a grid's shared-priors step build, and the report order (registration order).
+
+    register(MethodSpec(name="mine", target="gsbench.methods.mine:Mine", label="Mine", section=None,
+                        resolve=resolve_rgb_only, uses=uses_nothing))
+"""
+from __future__ import annotations
+
+import copy
+import importlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterator, Optional
+
+from gsbench.errors import InputError
+
+Drop = Callable[[str, str], None]
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """What gsbench knows about a method without importing it."""
+
+    name: str
+    target: str                          # "module:Class" implementing gsbench.methods.base.Method
+    label: str                           # name in tables and plots
+    section: Optional[str]               # the method's own top-level config section (None: shared keys only)
+    resolve: Callable[[dict, Any, Drop], None]   # edits the config in place; drop(part, reason) records why
+    uses: Callable[[dict], dict]         # resolved config -> {"depth_prior": bool, "semantics": bool}
+    per_frame_masks: bool = False        # semantic masks per view (not propagated across views)
+
+
+_REGISTRY: dict[str, MethodSpec] = {}
+
+
+class _Names(Sequence):
+    """The registered names, in registration order, read live (a method registered later is in it)."""
+
+    def __getitem__(self, i):  # type: ignore[override]
+        return tuple(_REGISTRY)[i]
+
+    def __len__(self) -> int:
+        return len(_REGISTRY)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(tuple(_REGISTRY))
+
+    def __contains__(self, name: object) -> bool:
+        return name in _REGISTRY
+
+    def __repr__(self) -> str:
+        return repr(tuple(_REGISTRY))
+
+
+METHODS: Sequence[str] = _Names()
+
+
+def register(spec: MethodSpec) -> MethodSpec:
+    """Add a method; a second registration of the same name is a programming error."""
+    if not spec.name or not spec.name.replace("-", "").replace("_", "").isalnum():
+        raise ValueError(f"method name {spec.name!r}: use letters, digits, '-' or '_'")
+    if spec.name in _REGISTRY:
+        raise ValueError(f"method {spec.name!r} is already registered (by {_REGISTRY[spec.name].target})")
+    if ":" not in spec.target:
+        raise ValueError(f"method {spec.name!r}: target must be 'module:Class', got {spec.target!r}")
+    _REGISTRY[spec.name] = spec
+    return spec
+
+
+def unregister(name: str) -> None:
+    """Remove a method (tests register throw-away methods)."""
+    _REGISTRY.pop(name, None)
+
+
+def get_spec(name: str) -> MethodSpec:
+    if name not in _REGISTRY:
+        raise InputError(f"unknown method {name!r}; choose one of {', '.join(_REGISTRY)}")
+    return _REGISTRY[name]
+
+
+def get_method(name: str) -> type:
+    """The Method class registered under `name` (imported now)."""
+    spec = get_spec(name)
+    module, _, attr = spec.target.partition(":")
+    klass = getattr(importlib.import_module(module), attr)
+    if getattr(klass, "name", None) != spec.name:
+        raise TypeError(f"{spec.target}.name is {getattr(klass, 'name', None)!r}, registered as {spec.name!r}")
+    return klass
+
+
+def method_sort_key(name: Any) -> tuple[int, str]:
+    """Report order: registration order, unknown names last (alphabetical)."""
+    names = tuple(_REGISTRY)
+    return (names.index(name) if name in names else len(names), str(name))
+
+
+# ---------------------------------------------------------------------------- per-scene resolution
+def resolve_for_scene(config: dict, scene) -> tuple[dict, dict]:
+    """Switch off every loss, prior and output the scene cannot feed or nothing uses; record why.
+
+    Returns (resolved config, dropped {part: reason}); the resolved config also carries `dropped`.
+    Resolving a resolved config again gives the same losses and priors.
+    """
+    cfg = copy.deepcopy(config)
+    spec = get_spec(cfg["method"])
+    if spec.section is not None and not isinstance(cfg.get(spec.section), dict):
+        raise InputError(f"method {spec.name}: the config has no {spec.section!r} section")
+    dropped: dict[str, str] = {}
+
+    def drop(part: str, reason: str) -> None:
+        dropped.setdefault(part, reason)
+
+    spec.resolve(cfg, scene, drop)
+    cfg["dropped"] = dropped
+    return cfg, dropped
+
+
+def depth_source(cfg: dict, scene) -> tuple[bool, str]:
+    """Can the scene feed the configured depth provider? (ok, reason when not)."""
+    prov = cfg["priors"]["depth"]["provider"]
+    if prov in (None, "none"):
+        return False, "priors.depth.provider=none"
+    if prov == "gt" and not scene.has_depth:
+        return False, "priors.depth.provider=gt but the scene has no GT depth"
+    if prov == "sparse" and not scene.has_points:
+        return False, "priors.depth.provider=sparse but the scene has no sparse points"
+    return True, ""
+
+
+def semantic_source(cfg: dict, scene) -> tuple[bool, str]:
+    """Can the scene feed the configured mask and feature providers? (ok, reason when not)."""
+    m = cfg["priors"]["masks"]["provider"]
+    f = cfg["priors"]["features"]["provider"]
+    if m in ("gt", "simulated") and not scene.has_instances:
+        return False, f"priors.masks.provider={m} needs GT instances and the scene has none (no semantics in the scene)"
+    if f == "text-aligned" and not (scene.has_semantics or (scene.has_instances and scene.instance_classes and scene.class_names)):
+        return False, "priors.features.provider=text-aligned needs GT classes and the scene has none (no semantics in the scene)"
+    return True, ""
+
+
+def resolve_semantics(cfg: dict, scene, drop: Drop) -> None:
+    """Semantic losses off when the scene cannot feed them; semantic priors dropped when unused."""
+    on = cfg["gaussiands"]["losses"]
+    ok, why = semantic_source(cfg, scene)
+    if not ok:
+        for k in ("sem", "ds"):
+            if on[k]:
+                on[k] = False
+                drop(f"gaussiands.losses.{k}", why)
+    if not (on["sem"] or on["ds"]):
+        reason = why if not ok else "nothing uses it (gaussiands.losses.sem and .ds are off)"
+        for part in ("priors.masks", "priors.features", "gaussiands.autoencoder", "semantic_channels"):
+            drop(part, reason)
+
+
+# ---------------------------------------------------------------------------- priors request
+def priors_request(config: dict, scene) -> Optional[dict]:
+    """What the method will ask gsbench.priors for, or None when it needs no priors.
+
+    `config` may be resolved or not (it is resolved for `scene` here); `scene` is a loaded scene or
+    its folder. A grid groups cells by this dict; fit() computes its priors from the same dict
+    (methods/common.py fit_priors), so equal requests hit the same cache entry.
+    """
+    req = build_priors_request(config, scene)
+    if req is None or not (req["need_depth"] or req["need_sem"]):
+        return None
+    return req
+
+
+def build_priors_request(config: dict, scene) -> Optional[dict]:
+    """The request even when it asks for nothing (fit still orders the views); None without train views."""
+    if isinstance(scene, (str, Path)):
+        from gsbench.datasets import load_scene
+        scene = load_scene(scene)
+    cfg, _ = resolve_for_scene(config, scene)
+    if not scene.train_ids:
+        return None
+    spec = get_spec(cfg["method"])
+    use = spec.uses(cfg)
+    from gsbench.methods.base import training_size
+    w, h = training_size(scene.cameras[scene.train_ids[0]], cfg["train"].get("max_width"))
+    return {"scene_path": str(scene.path), "priors": cfg["priors"], "view_ids": sorted(scene.train_ids),
+            "size": [w, h], "need_depth": bool(use["depth_prior"]), "need_sem": bool(use["semantics"]),
+            "per_frame": bool(spec.per_frame_masks), "seed": int(cfg["seed"])}
+
+
+# ---------------------------------------------------------------------------- the built-in methods
+def _resolve_vanilla(cfg: dict, scene, drop: Drop) -> None:
+    on = cfg["gaussiands"]["losses"]
+    for k in ("depth", "tv", "sem", "ds"):
+        on[k] = False
+    for part in ("priors.depth", "priors.masks", "priors.features", "gaussiands.autoencoder", "semantic_channels"):
+        drop(part, "method vanilla is RGB only")
+
+
+def _uses_vanilla(cfg: dict) -> dict:
+    return {"depth_prior": False, "semantics": False}
+
+
+def _resolve_twostage(cfg: dict, scene, drop: Drop) -> None:
+    on = cfg["gaussiands"]["losses"]
+    on["depth"] = on["tv"] = on["ds"] = False
+    drop("priors.depth", "method twostage uses no depth prior (RGB, then semantics on frozen geometry)")
+    for k in ("depth", "tv", "ds"):
+        drop(f"gaussiands.losses.{k}", "method twostage: RGB + L_sem only")
+    resolve_semantics(cfg, scene, drop)
+
+
+def _uses_twostage(cfg: dict) -> dict:
+    return {"depth_prior": False, "semantics": bool(cfg["gaussiands"]["losses"]["sem"])}
+
+
+def _resolve_gaussiands(cfg: dict, scene, drop: Drop) -> None:
+    g = cfg["gaussiands"]
+    on = g["losses"]
+    if g["depth_formulation"] == "none" and on["depth"]:
+        on["depth"] = False
+        drop("gaussiands.losses.depth", "gaussiands.depth_formulation=none")
+    ok, why = depth_source(cfg, scene)
+    if not ok:
+        for k in ("depth", "ds"):
+            if on[k]:
+                on[k] = False
+                drop(f"gaussiands.losses.{k}", f"no depth prior: {why}")
+        drop("priors.depth", why)
+    elif not (on["depth"] or on["ds"]):
+        drop("priors.depth", "nothing uses it (gaussiands.losses.depth and .ds are off)")
+    resolve_semantics(cfg, scene, drop)
+
+
+def _uses_gaussiands(cfg: dict) -> dict:
+    g = cfg["gaussiands"]
+    on = g["losses"]
+    depth_terms = bool(on["depth"] and g["depth_formulation"] != "none") or bool(on["ds"])
+    return {"depth_prior": depth_terms, "semantics": bool(on["sem"] or on["ds"])}
+
+
+# registration order is the report order: the RGB baseline, the decoupled baseline, the reference
+register(MethodSpec(name="vanilla", target="gsbench.methods.vanilla:Vanilla", label="3DGS (vanilla)",
+                    section=None, resolve=_resolve_vanilla, uses=_uses_vanilla))
+register(MethodSpec(name="twostage", target="gsbench.methods.twostage:TwoStage", label="Two-stage",
+                    section="twostage", resolve=_resolve_twostage, uses=_uses_twostage, per_frame_masks=True))
+register(MethodSpec(name="gaussiands", target="gsbench.methods.gaussiands:GaussianDS", label="GaussianDS",
+                    section="gaussiands", resolve=_resolve_gaussiands, uses=_uses_gaussiands))
+
+__all__ = ["MethodSpec", "METHODS", "register", "unregister", "get_spec", "get_method", "method_sort_key",
+           "resolve_for_scene", "priors_request", "build_priors_request", "depth_source", "semantic_source",
+           "resolve_semantics"]
