@@ -18,7 +18,11 @@ from gsbench.reports import html as html_mod
 from gsbench.reports import plots
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null
 from gsbench.reports.spec import STUDIES
-from gsbench.reports.studies import build_tables
+from gsbench.reports.ablations import (
+    depth_formulation_table, loss_subsets_table, noise_table, ordering_table, other_study_tables,
+)
+from gsbench.reports.studies import reconstruction_table, removal_table, semantic_table
+from gsbench.reports.sweeps import lambda_table, latent_dim_tables
 from gsbench.reports.table import Table
 from gsbench.store import write_text_atomic
 
@@ -105,7 +109,7 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
     for t in it:
         sec = section(t.section or _section_of(t.id))
         sec.tables.append(t)
-        if not t.id.startswith(_NO_BARS):
+        if not t.id.startswith(_NO_BARS) and not t.id.endswith("_diff"):
             p = plots.plot_table_bars(t, plot_dir / f"bars_{t.id}.png")
             if p:
                 summary.plots.append(p)
@@ -178,6 +182,28 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
     html_mod.write_index(summary.index, "gsbench report", src, generated, ordered, summary.notes, res, links,
                          _writer_version())
     return summary
+
+
+def build_tables(res: Results) -> list[Table]:
+    """Every table that has data, in the paper's order."""
+    tables: list[Table] = []
+    tables += reconstruction_table(res)
+    tables += semantic_table(res, "lerf", ["miou_lerf"], "lerf_miou", "LERF-OVS mIoU per scene",
+                             "Open-vocabulary segmentation on LERF-OVS scenes (mIoU, %; LangSplat protocol).")
+    tables += semantic_table(res, "lerf", ["loc_acc_lerf"], "lerf_loc_acc", "LERF-OVS localization accuracy",
+                             "Localization accuracy on LERF-OVS scenes (%).")
+    tables += semantic_table(res, "3dovs", ["miou_3dovs", "mbiou_3dovs"], "3dovs_miou_mbiou",
+                             "3D-OVS mIoU and mBIoU per scene",
+                             "Boundary-aware semantic segmentation on 3D-OVS scenes (mIoU and boundary mIoU, %).")
+    tables += removal_table(res)
+    tables += ordering_table(res)
+    tables += depth_formulation_table(res)
+    tables += loss_subsets_table(res)
+    tables += latent_dim_tables(res)
+    tables += lambda_table(res)
+    tables += noise_table(res)
+    tables += other_study_tables(res)
+    return tables
 
 
 def _write_tables(tables: list[Table], table_dir: Path, out_dir: Path) -> None:

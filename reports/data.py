@@ -134,6 +134,23 @@ class Results:
             c.reason = "; ".join(uniq)
         return c
 
+    def seed_values(self, run_ids: list[str], metric: str | None, scale: float = 1.0) -> dict:
+        """Finite values of the finished runs, keyed by seed (run id when the seed is unknown);
+        when two runs share a seed (rows merged because they are one resolved config), the first is kept."""
+        out: dict = {}
+        if metric is None:
+            return out
+        for rid in run_ids:
+            if self.runs.at[rid, "status"] != "done":
+                continue
+            got = self.values.get((rid, metric))
+            if got is None or not math.isfinite(got[0]):
+                continue
+            seed = self.runs.at[rid, "seed"]
+            key = int(seed) if not is_null(seed) else rid
+            out.setdefault(key, got[0] * scale)
+        return out
+
     def mixed_configs(self, run_ids: list[str]) -> bool:
         """True when the runs of one cell differ by more than their seed (config hash or providers)."""
         if len(run_ids) < 2:

@@ -15,7 +15,9 @@ from gsbench.cli import main
 from gsbench.collect import collect, read_collected, write_collected
 from gsbench.reports.data import Results
 from gsbench.reports.plots import pareto_front, train_curve
-from gsbench.reports.studies import build_tables, pearson, reconstruction_table
+from gsbench.reports.build import build_tables
+from gsbench.reports.stats import pearson
+from gsbench.reports.studies import reconstruction_table
 from gsbench.reports.table import Cell, Column, Row, Table
 from test_report_synthetic import (
     LAMBDA_DEPTH, LAMBDA_SEM, lambda_miou, make_all, make_main, write_run,
@@ -184,13 +186,17 @@ def test_partial_runs_dir(tmp_path: Path):
     out = tmp_path / "rep"
     from gsbench.reports import build_report
     s = build_report(root, out)
-    assert s.tables == ["ordering"]
+    assert s.tables == ["ordering", "ordering_diff"]
     html = (out / "index.html").read_text()
     note = re.search(r"No runs for: ([^<]*)", html).group(1)
     for st in ("main results", "depth_formulation", "loss_subsets", "latent_dim", "lambda_grid", "depth_noise"):
         assert st in note
     assert "ordering" not in note.replace("main results", "")
     assert md_rows(out, "ordering") == [["Random", "4.000", "25.00"], ["Pose-nearest", "**1.000**", "**50.00**"]]
+    # one seed per row: a difference, but its interval is n/a, never of zero width
+    assert md_rows(out, "ordering_diff") == [
+        ["Random", "+3.000 [n/a: one seed] (n=1, paired)", "-25.00 [n/a: one seed] (n=1, paired)"],
+        ["Pose-nearest", "reference", "reference"]]
     assert not (out / "tables" / "reconstruction.md").exists()
 
 
@@ -323,9 +329,14 @@ def test_unknown_study_gets_generic_table(tmp_path: Path):
                       grid={"gaussiands.latent_dim": d, "gaussiands.losses.ds": ds},
                       metrics={"psnr": 20.0 + d + ds, "miou_3dovs": 0.1 * d})
     tables = build_tables(Results(collect(root)))
-    assert [t.id for t in tables] == ["study_tiny_test"]
+    assert [t.id for t in tables] == ["study_tiny_test", "study_tiny_test_diff"]
     t = tables[0]
     assert t.label_headers == ["gaussiands.latent_dim", "gaussiands.losses.ds"] and t.section == "other_tiny-test"
     got = [(r.labels, [c.plain() for c in r.cells]) for r in t.rows]
     assert got == [(["3", "False"], ["23.00", "30.00"]), (["3", "True"], ["24.00", "30.00"]),
                    (["6", "False"], ["26.00", "60.00"]), (["6", "True"], ["27.00", "60.00"])]
+    diff = tables[1]  # reference: d = 3 with L_ds on
+    assert diff.section == "other_tiny-test"
+    assert [r.cells[0].plain() for r in diff.rows] == [
+        "-1.00 [n/a: one seed] (n=1, paired)", "reference", "+2.00 [n/a: one seed] (n=1, paired)",
+        "+3.00 [n/a: one seed] (n=1, paired)"]
