@@ -56,6 +56,16 @@ def t_quantile(df: float) -> float:
     return float(sps.t.ppf(0.5 + LEVEL / 2.0, df))
 
 
+def _mean_sd(x: np.ndarray) -> tuple[float, float]:
+    """Mean and sample std (ddof=1) computed on x / max|x|, so values near the float64 limit do not
+    overflow in the sum or the squares."""
+    s = float(np.max(np.abs(x)))
+    if s == 0.0:
+        return 0.0, 0.0
+    y = x / s
+    return s * float(y.mean()), (s * float(y.std(ddof=1)) if x.size > 1 else 0.0)
+
+
 def compare(a: dict, b: dict) -> Diff:
     """Row values by seed `a` against reference values by seed `b` (non-finite values ignored).
     Keys are seeds (int); a run without a seed is keyed by its run id and never paired."""
@@ -67,29 +77,39 @@ def compare(a: dict, b: dict) -> Diff:
         return out
     xa = np.array(list(a.values()), dtype=np.float64)
     xb = np.array(list(b.values()), dtype=np.float64)
-    out.delta = float(xa.mean() - xb.mean())
-    if set(a) == set(b) and all(isinstance(s, int) for s in a):
+    (ma, sa), (mb, sb) = _mean_sd(xa), _mean_sd(xb)
+    if set(a) == set(b) and all(isinstance(k, int) for k in a):
         out.method = "paired"
-        d = np.array([a[s] - b[s] for s in sorted(a)], dtype=np.float64)
+        d = np.array([a[k] / 2.0 - b[k] / 2.0 for k in sorted(a)], dtype=np.float64)  # halves: no overflow
+        md, sd = _mean_sd(d)
+        delta = 2.0 * md
         if d.size < 2:
-            out.reason = "one seed"
-            return out
-        half = t_quantile(d.size - 1) * float(d.std(ddof=1)) / math.sqrt(d.size)
+            half = None
+        else:
+            half = 2.0 * t_quantile(d.size - 1) * sd / math.sqrt(d.size)
     else:
         out.method = "welch"
+        delta = ma - mb
         if xa.size < 2 or xb.size < 2:
-            out.reason = "one seed"
-            return out
-        va, vb = float(xa.var(ddof=1)) / xa.size, float(xb.var(ddof=1)) / xb.size
-        se2 = va + vb
-        if se2 <= 0.0:  # no spread on either side: the difference is exact
-            half = 0.0
+            half = None
         else:
-            # Welch-Satterthwaite degrees of freedom; a side without spread contributes no term
-            den = (va * va / (xa.size - 1) if va > 0 else 0.0) + (vb * vb / (xb.size - 1) if vb > 0 else 0.0)
-            dof = se2 * se2 / den
-            half = t_quantile(dof) * math.sqrt(se2)
-    out.lo, out.hi = out.delta - half, out.delta + half
+            ea, eb = sa / math.sqrt(xa.size), sb / math.sqrt(xb.size)  # standard errors
+            se = math.hypot(ea, eb)
+            if se == 0.0:  # no spread on either side: the difference is exact
+                half = 0.0
+            else:
+                # Welch-Satterthwaite degrees of freedom, on shares of se (no squares of large values)
+                pa, pb = ea / se, eb / se
+                dof = 1.0 / (pa ** 4 / (xa.size - 1) + pb ** 4 / (xb.size - 1))
+                half = t_quantile(dof) * se
+    if not math.isfinite(delta) or (half is not None and not math.isfinite(half)):
+        out.reason = "difference overflows float64"
+        return out
+    out.delta = delta
+    if half is None:
+        out.reason = "one seed"
+        return out
+    out.lo, out.hi = delta - half, delta + half
     return out
 
 

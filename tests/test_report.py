@@ -53,7 +53,8 @@ def test_reconstruction_table(report: Path):
     assert bench[1:5] == ["0.600", "20.00", "n/a (no LPIPS weights)", "100.0"]
     assert bench[5:9] == ["0.650", "22.00", "n/a (no LPIPS weights)", "**120.0**"]
     # two seeds: mean and sample std by hand: ssim (0.70, 0.72) -> 0.710 +- 0.0141; psnr (24, 26) -> 25 +- 1.414
-    assert bench[9:13] == ["**0.710 ± 0.014**", "**25.00 ± 1.41**", "n/a (no LPIPS weights)", "100.0 ± 14.1"]
+    assert bench[9:13] == ["**0.710 ± 0.014 (n=2)**", "**25.00 ± 1.41 (n=2)**", "n/a (no LPIPS weights)",
+                          "100.0 ± 14.1 (n=2)"]
     sofa = row_of(rows, "sofa")
     assert sofa[1:5] == ["–"] * 4  # no vanilla run on sofa
     assert sofa[5] == "**0.810**" and sofa[10] == "**26.00**" and sofa[6] == "25.00"
@@ -61,7 +62,7 @@ def test_reconstruction_table(report: Path):
     kitchen = row_of(rows, "waldo_kitchen")
     assert kitchen[7] == "0.250" and kitchen[11] == "**0.200**"  # LPIPS: lower is better
     tex = (report / "tables" / "reconstruction.tex").read_text()
-    assert "\\textbf{25.00 $\\pm$ 1.41}" in tex and "waldo\\_kitchen" in tex
+    assert "\\textbf{25.00 $\\pm$ 1.41 (n=2)}" in tex and "waldo\\_kitchen" in tex
     assert "\\multicolumn{4}{c|}{\\textit{\\textbf{3DGS (vanilla)}}}" in tex
     assert "\\textbf{0.600}" not in tex
 
@@ -70,7 +71,7 @@ def test_semantic_tables(report: Path):
     rows = md_rows(report, "3dovs_miou_mbiou")
     g = row_of(rows, "GaussianDS")
     # bench (0.90, 0.94) -> 92.00 +- 2.83; sofa 98.00; overall mIoU (92 + 98) / 2 = 95.00
-    assert g == ["GaussianDS", "**92.00 ± 2.83**", "**82.00 ± 2.83**", "**98.00**", "**86.00**", "**95.00**", "**84.00**"]
+    assert g == ["GaussianDS", "**92.00 ± 2.83 (n=2)**", "**82.00 ± 2.83 (n=2)**", "**98.00**", "**86.00**", "**95.00**", "**84.00**"]
     t = row_of(rows, "Two-stage")
     assert t[1:] == ["85.00", "70.00", "80.00", "75.00", "82.50", "72.50"]
     v = row_of(rows, "3DGS (vanilla)")
@@ -165,7 +166,7 @@ def test_html_references_plots_tables_and_provenance(report: Path):
     assert sorted(srcs) == sorted(f"plots/{p.name}" for p in (report / "plots").glob("*.png"))
     for s in srcs:
         assert (report / s).is_file()
-    assert "<strong>25.00 ± 1.41</strong>" in html and "n/a (no LPIPS weights)" in html
+    assert "<strong>25.00 ± 1.41 (n=2)</strong>" in html and "n/a (no LPIPS weights)" in html
     for t in ("reconstruction", "3dovs_miou_mbiou", "loss_subsets", "latent_dim_waldo_kitchen", "depth_noise"):
         assert f'id="tab-{t}"' in html
     prov = html[html.index('id="provenance"'):]
@@ -216,7 +217,7 @@ def test_protocols_never_averaged(tmp_path: Path):
     (t,) = reconstruction_table(Results(collect(root)))
     psnr = t.columns.index(next(c for c in t.columns if c.metric == "psnr"))
     got = [(r.section, r.labels[0], r.cells[psnr].plain()) for r in t.rows]
-    assert got == [("3D-OVS protocol", "bench", "20.00"), ("LERF-OVS protocol", "bench", "29.00 ± 1.41")]
+    assert got == [("3D-OVS protocol", "bench", "20.00"), ("LERF-OVS protocol", "bench", "29.00 ± 1.41 (n=2)")]
 
 
 def test_partial_seeds_and_mixed_configs(tmp_path: Path):
@@ -242,7 +243,7 @@ def test_collected_file_gives_same_tables(tmp_path: Path):
 
 def test_cell_format_and_bold_rules():
     assert Cell(mean=1.23456, decimals=2, n=1, total=1).plain() == "1.23"
-    assert Cell(mean=1.0, std=0.5, n=3, total=3, decimals=1).plain() == "1.0 ± 0.5"
+    assert Cell(mean=1.0, std=0.5, n=3, total=3, decimals=1).plain() == "1.0 ± 0.5 (n=3)"
     assert Cell(reason="no LPIPS weights").plain() == "n/a (no LPIPS weights)"
     assert Cell().plain() == "–"
     cols = [Column("psnr", "PSNR", "PSNR", "higher"), Column("lpips", "LPIPS", "LPIPS", "lower")]
