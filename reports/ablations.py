@@ -198,7 +198,7 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
             cells.append(c)
         for pr, m, scs in mean_groups:
             cells.append(mean_of_cells([by[(sc, m)] for sc in scs], scs, _spec_for(m).decimals))
-        group_ids = [r for sc, pr in pairs for r in row_runs(group, sc, pr)]
+        group_ids = [r for r in ids if any(_same_combo(tuple(_get(res, r, k) for k in keys), c) for c in group)]
         reasons = list(dict.fromkeys(why for r in group_ids for why in run_dropped(res, r).values()))
         if len(group) > 1:
             labels[-1] += " (merged: " + ("; ".join(reasons) or "same resolved config") + ")"

@@ -21,6 +21,7 @@ from gsbench.reports.spec import STUDIES
 from gsbench.reports.ablations import (
     depth_formulation_table, loss_subsets_table, noise_table, ordering_table, other_study_tables,
 )
+from gsbench.reports.claims import claims_table
 from gsbench.reports.studies import reconstruction_table, removal_table, semantic_table
 from gsbench.reports.sweeps import lambda_table, latent_dim_tables
 from gsbench.reports.table import Table
@@ -32,8 +33,9 @@ _SECTION_OF = [
     ("ordering", "ordering"), ("depth_formulation", "depth_formulation"), ("loss_subsets", "loss_subsets"),
     ("latent_dim", "latent_dim"), ("lambda_", "lambda_grid"), ("depth_noise", "depth_noise"),
 ]
-_SECTION_TITLES = {"main": "Main results (reconstruction and segmentation)", **{k: v for k, v in STUDIES.items() if k != "reconstruction"}}
-_NO_BARS = ("latent_dim", "lambda_pearson")
+_SECTION_TITLES = {"main": "Main results (reconstruction and segmentation)", **{k: v for k, v in STUDIES.items() if k != "reconstruction"},
+                   "claims": "Paper claims: reproduced or not"}
+_NO_BARS = ("latent_dim", "lambda_pearson", "paper_claims")
 
 
 @dataclass
@@ -174,7 +176,7 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         for f in sorted(full)[:5]:
             summary.notes.append(f"n/a ({short}) in full: {f}")
 
-    order = ["main"] + [k for k in STUDIES if k != "reconstruction"]
+    order = ["main", "claims"] + [k for k in STUDIES if k != "reconstruction"]
     ordered = [sections[k] for k in order if k in sections] + [s for k, s in sections.items() if k not in order]
     links = [("tables.md", "tables (Markdown)"), ("tables.tex", "tables (LaTeX)"),
              (summary.collected.name, f"collected results ({summary.collected.suffix[1:]})")]
@@ -203,6 +205,7 @@ def build_tables(res: Results) -> list[Table]:
     tables += lambda_table(res)
     tables += noise_table(res)
     tables += other_study_tables(res)
+    tables += claims_table(res)
     return tables
 
 

@@ -187,7 +187,7 @@ def test_partial_runs_dir(tmp_path: Path):
     out = tmp_path / "rep"
     from gsbench.reports import build_report
     s = build_report(root, out)
-    assert s.tables == ["ordering", "ordering_diff"]
+    assert s.tables == ["ordering", "ordering_diff", "paper_claims"]
     html = (out / "index.html").read_text()
     note = re.search(r"No runs for: ([^<]*)", html).group(1)
     for st in ("main results", "depth_formulation", "loss_subsets", "latent_dim", "lambda_grid", "depth_noise"):
