@@ -15,12 +15,13 @@ import pandas as pd
 from gsbench.collect import collect, read_collected, write_collected
 from gsbench.errors import InputError
 from gsbench.reports import html as html_mod
-from gsbench.reports import plots
+from gsbench.reports import plots, shares
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null
 from gsbench.reports.spec import STUDIES
 from gsbench.reports.ablations import (
     depth_formulation_table, loss_subsets_table, noise_table, ordering_table, other_study_tables,
 )
+from gsbench.reports.budgets import budget_table
 from gsbench.reports.claims import claims_table
 from gsbench.reports.studies import reconstruction_table, removal_table, semantic_table
 from gsbench.reports.sweeps import lambda_table, latent_dim_tables
@@ -34,8 +35,8 @@ _SECTION_OF = [
     ("latent_dim", "latent_dim"), ("lambda_", "lambda_grid"), ("depth_noise", "depth_noise"),
 ]
 _SECTION_TITLES = {"main": "Main results (reconstruction and segmentation)", **{k: v for k, v in STUDIES.items() if k != "reconstruction"},
-                   "claims": "Paper claims: reproduced or not"}
-_NO_BARS = ("latent_dim", "lambda_pearson", "paper_claims")
+                   "claims": "Paper claims: reproduced or not", "budgets": "Training budget per method"}
+_NO_BARS = ("latent_dim", "lambda_pearson", "paper_claims", "budgets")
 
 
 @dataclass
@@ -140,6 +141,13 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
                                 "front of final value vs total time (one per scene)."))
         else:
             sec.notes.append("No time curve: the runs have neither periodic evaluations nor final values with a training time.")
+        p, notes = shares.plot_loss_shares(res, st if key != "main" else None, ids, plot_dir / f"shares_{_slug(key)}.png")
+        sec.notes += notes
+        if p:
+            summary.plots.append(p)
+            sec.figures.append((p.relative_to(out_dir).as_posix(),
+                                "Loss shares: each weighted loss term's share of the total loss over training steps "
+                                "(train_log.jsonl loss_share), one panel per configuration, mean over its seeds (n)."))
 
     for p in plots.plot_lambda_surfaces(res, plot_dir / "lambda_surfaces"):
         summary.plots.append(p)
@@ -176,7 +184,7 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         for f in sorted(full)[:5]:
             summary.notes.append(f"n/a ({short}) in full: {f}")
 
-    order = ["main", "claims"] + [k for k in STUDIES if k != "reconstruction"]
+    order = ["main", "budgets", "claims"] + [k for k in STUDIES if k != "reconstruction"]
     ordered = [sections[k] for k in order if k in sections] + [s for k, s in sections.items() if k not in order]
     links = [("tables.md", "tables (Markdown)"), ("tables.tex", "tables (LaTeX)"),
              (summary.collected.name, f"collected results ({summary.collected.suffix[1:]})")]
@@ -206,6 +214,7 @@ def build_tables(res: Results) -> list[Table]:
     tables += noise_table(res)
     tables += other_study_tables(res)
     tables += claims_table(res)
+    tables += budget_table(res)
     return tables
 
 

@@ -90,6 +90,17 @@ def runs_html(res: Results) -> str:
     if len(bad):
         items = "".join(f"<li><code>{e(str(r['run_dir']))}</code>: {e(str(r['status']))}</li>" for _, r in bad.iterrows())
         out.append(f"<p>Runs not finished (their values show as n/a):</p><ul>{items}</ul>")
+    if "dropped" in df.columns:
+        dropped = [(r["run_dir"], r["dropped"]) for _, r in df.iterrows()
+                   if not is_null(r["dropped"]) and str(r["dropped"]).strip()]
+        if dropped:
+            items = "".join(f"<li><code>{e(str(d))}</code>: {e(str(t))}</li>" for d, t in dropped)
+            out.append("<p>Settings the resolver dropped (the run trained without them; grid rows that became "
+                       f"the same configuration are merged in the tables):</p><ul>{items}</ul>")
+        else:
+            out.append("<p>The resolver dropped no setting in any run.</p>")
+    else:
+        out.append("<p>Dropped settings: not recorded in the collected table (no 'dropped' column).</p>")
     return "\n".join(out)
 
 

@@ -187,7 +187,7 @@ def test_partial_runs_dir(tmp_path: Path):
     out = tmp_path / "rep"
     from gsbench.reports import build_report
     s = build_report(root, out)
-    assert s.tables == ["ordering", "ordering_diff", "paper_claims"]
+    assert s.tables == ["ordering", "ordering_diff", "paper_claims", "budgets"]
     html = (out / "index.html").read_text()
     note = re.search(r"No runs for: ([^<]*)", html).group(1)
     for st in ("main results", "depth_formulation", "loss_subsets", "latent_dim", "lambda_grid", "depth_noise"):
@@ -238,7 +238,7 @@ def test_collected_file_gives_same_tables(tmp_path: Path):
     path = write_collected(df, root)
     a = [t.to_markdown() for t in build_tables(Results(df))]
     b = [t.to_markdown() for t in build_tables(Results(read_collected(path)))]
-    assert a == b and len(a) == 3
+    assert a == b and len(a) == 4  # with the budget table
 
 
 def test_cell_format_and_bold_rules():
@@ -330,7 +330,7 @@ def test_unknown_study_gets_generic_table(tmp_path: Path):
                       grid={"gaussiands.latent_dim": d, "gaussiands.losses.ds": ds},
                       metrics={"psnr": 20.0 + d + ds, "miou_3dovs": 0.1 * d})
     tables = build_tables(Results(collect(root)))
-    assert [t.id for t in tables] == ["study_tiny_test", "study_tiny_test_diff"]
+    assert [t.id for t in tables] == ["study_tiny_test", "study_tiny_test_diff", "budgets"]
     t = tables[0]
     assert t.label_headers == ["gaussiands.latent_dim", "gaussiands.losses.ds"] and t.section == "other_tiny-test"
     got = [(r.labels, [c.plain() for c in r.cells]) for r in t.rows]

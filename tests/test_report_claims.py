@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import pytest
 
 from gsbench.collect import collect
 from gsbench.reports.ablations import loss_subsets_table, parse_dropped
@@ -166,3 +165,16 @@ def test_dropped_setting_is_not_testable_and_rows_merge(tmp_path: Path):
 def test_parse_dropped():
     assert parse_dropped("") == {} and parse_dropped(None) == {}
     assert parse_dropped("a.b: no x; c: off") == {"a.b": "no x", "c": "off"}
+
+
+def test_report_lists_dropped_per_run(tmp_path: Path):
+    from gsbench.collect import write_collected
+    from gsbench.reports.build import build_report
+    df = _loss_runs(tmp_path / "runs")
+    path = write_collected(df, tmp_path)
+    build_report(path, tmp_path / "rep")
+    html = (tmp_path / "rep" / "index.html").read_text()
+    assert "Settings the resolver dropped" in html
+    assert html.count("gaussiands.losses.depth: no depth prior; priors.depth: no depth prior") >= 2  # runs list + table
+    md = (tmp_path / "rep" / "tables" / "loss_subsets.md").read_text()
+    assert "(merged: no depth prior)" in md
