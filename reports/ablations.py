@@ -10,7 +10,7 @@ from typing import Any, Callable
 
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, same
 from gsbench.reports.spec import (
-    AX_FORMULATION, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_ORDERING, LOSS_SUBSET_ORDER,
+    AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_ORDERING, LOSS_SUBSET_ORDER,
     METHOD_ORDER, REFERENCE_TEXT, STUDIES, STUDY_REFERENCE, method_label, metric_spec,
 )
 from gsbench.reports.stats import compare
@@ -110,8 +110,10 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
     ids = res.run_ids(study=study)
     if not ids:
         return []
-    extra = [c for c in res.axis_columns if c not in row_axes and len(res.distinct(c, ids)) > 1]
     methods = ordered_methods(res.distinct("method", ids))
+    # axis.method (a grid cell that sets the method) repeats the method column when there is one
+    extra = [c for c in res.axis_columns if c not in row_axes and len(res.distinct(c, ids)) > 1
+             and not (c == "axis.method" and len(methods) > 1)]
     keys = ["method"] * (len(methods) > 1) + row_axes + extra
     combos: list[tuple] = []
     for rid in ids:
@@ -310,6 +312,22 @@ def noise_table(res: Results) -> list[Table]:
         "Noise injected into the depth prior only, by kind and severity (0 = clean).",
         [AX_NOISE_TYPE, AX_NOISE_SEVERITY], ["Noise", "Severity"], ["psnr", "ssim", "lpips", "miou"],
         row_labels=labels)
+
+
+def method_diff_table(res: Results) -> list[Table]:
+    """The reconstruction grid's methods against GaussianDS (difference table only: the values are in
+    Tables I-III)."""
+    ts = ablation_table(res, "reconstruction", "reconstruction_methods", "Methods", "Methods of the reconstruction grid.",
+                        [], [], ["psnr", "ssim", "lpips", "miou", "mbiou"])
+    return [t for t in ts if t.id.endswith("_diff")]
+
+
+def latent_diff_table(res: Results) -> list[Table]:
+    """Each latent dimension (and the vanilla reference) against d = 3 (difference table only: the values
+    are in the transposed latent-d table)."""
+    ts = ablation_table(res, "latent_dim", "latent_dim_rows", "Latent dimension d", "Latent dimension d.",
+                        [AX_LATENT], ["d"], ["miou", "psnr", "train_s"])
+    return [t for t in ts if t.id.endswith("_diff")]
 
 
 def other_study_tables(res: Results) -> list[Table]:

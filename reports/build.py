@@ -19,7 +19,8 @@ from gsbench.reports import plots, shares
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null
 from gsbench.reports.spec import STUDIES
 from gsbench.reports.ablations import (
-    depth_formulation_table, loss_subsets_table, noise_table, ordering_table, other_study_tables,
+    depth_formulation_table, latent_diff_table, loss_subsets_table, method_diff_table, noise_table, ordering_table,
+    other_study_tables,
 )
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.claims import claims_table
@@ -206,10 +207,12 @@ def build_tables(res: Results) -> list[Table]:
                              "3D-OVS mIoU and mBIoU per scene",
                              "Boundary-aware semantic segmentation on 3D-OVS scenes (mIoU and boundary mIoU, %).")
     tables += removal_table(res)
+    tables += method_diff_table(res)
     tables += ordering_table(res)
     tables += depth_formulation_table(res)
     tables += loss_subsets_table(res)
     tables += latent_dim_tables(res)
+    tables += latent_diff_table(res)
     tables += lambda_table(res)
     tables += noise_table(res)
     tables += other_study_tables(res)

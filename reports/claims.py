@@ -87,10 +87,10 @@ PAPER_CLAIMS: list[Claim] = [
           f"{_ABL}, Table tab-ordering (five 3D-OVS scenes)", "ordering", "ordering_adjacent_mask_iou", +1,
           53.21 - 50.85, "53.21 vs 50.85 %", {AX_ORDERING: "pose"}, {AX_ORDERING: "filename"}),
     Claim("lambda_depth_r", "lambda_depth correlates negatively with mIoU",
-          f"{_ABL} (sensitivity), Fig. fig-lambda-sweep", "lambda_grid", "miou", -1, -0.89, "r = -0.89",
+          f"{_ABL} (sensitivity), Fig. fig-lambda-sweep", "lambda_grid", "miou", -1, -0.89, "Pearson r",
           correlation="axis.gaussiands.lambdas.depth"),
     Claim("lambda_sem_r", "lambda_sem correlates positively with mIoU",
-          f"{_ABL} (sensitivity), Fig. fig-lambda-sweep", "lambda_grid", "miou", +1, 0.69, "r = +0.69",
+          f"{_ABL} (sensitivity), Fig. fig-lambda-sweep", "lambda_grid", "miou", +1, 0.69, "Pearson r",
           correlation="axis.gaussiands.lambdas.sem"),
     Claim("latent_16_3", "mIoU rises from d = 3 to d = 16", f"{_ABL}, Table tab-dims (waldo_kitchen)",
           "latent_dim", "miou", +1, 62.83 - 61.42, "62.83 vs 61.42 %",
@@ -104,7 +104,7 @@ PAPER_CLAIMS: list[Claim] = [
           {AX_NOISE_TYPE: None, AX_NOISE_SEVERITY: 0}),
     *[Claim(f"noise_{kind}", f"PSNR is robust to {kind.replace('_', '-')} noise on the depth prior",
             "Sec. Multi-view 3D Reconstruction (robustness), Fig. fig-noise", "depth_noise", "psnr", 0, None,
-            f"figure only; 'remarkably robust' (gsbench margin +-{ROBUST_MARGIN_DB} dB)",
+            f"figure only: 'remarkably robust'; gsbench margin +-{ROBUST_MARGIN_DB} dB",
             {AX_NOISE_TYPE: kind, AX_NOISE_SEVERITY: MAX}, {AX_NOISE_TYPE: None, AX_NOISE_SEVERITY: 0})
       for kind in ("gaussian", "poisson", "salt_pepper")],
 ]
