@@ -53,14 +53,15 @@ class Results:
             self.values[(str(rid), str(m))] = (float(v) if not is_null(v) else math.nan,
                                                None if is_null(reason) else str(reason))
         self.axis_columns = [c for c in df.columns if c.startswith("axis.")]
+        # plain dicts: selecting runs is the report's inner loop, and DataFrame.iterrows is slow
+        self._records = [(str(rid), row) for rid, row in zip(self.runs.index, self.runs.to_dict("records"))]
         self.long_reasons: dict[str, set[str]] = {}  # short reason shown in a cell -> full texts
 
     # ------------------------------------------------------------------ selection
     def run_ids(self, study: Any = "__any__", **eq: Any) -> list[str]:
         """Run ids whose columns equal the given values (study may be a tuple of allowed studies)."""
-        r = self.runs
         out = []
-        for rid, row in r.iterrows():
+        for rid, row in self._records:
             if study != "__any__":
                 allowed = study if isinstance(study, tuple) else (study,)
                 if not any(same(row["study"], s) for s in allowed):
