@@ -7,7 +7,7 @@ from typing import Any
 
 from gsbench.reports.data import Results, is_null, same
 from gsbench.reports.spec import AX_LAMBDAS, AX_LATENT, method_label
-from gsbench.reports.stats import pearson
+from gsbench.reports.stats import pearson, pearson_interval
 from gsbench.reports.studies import (
     PROTOCOL_SHORT, _axis_label, _cell, _finish, _get, _slug, _spec_for, runs_of, scene_protocols,
 )
@@ -103,11 +103,20 @@ def lambda_table(res: Results) -> list[Table]:
         cells = []
         for sc, pr in pairs:
             for m in ("miou", "psnr"):
-                r, why = pearson(*lambda_points(res, sc, pr, a, m))
-                cells.append(Cell(mean=r, n=1, total=1, decimals=3, reason=why))
+                xs, ys = lambda_points(res, sc, pr, a, m)
+                r, why = pearson(xs, ys)
+                ci = pearson_interval(r, len(xs)) if r is not None else None
+                if r is None:
+                    cells.append(Cell(decimals=3, total=1, reason=why))
+                elif ci is None:
+                    cells.append(Cell(text=f"{r:.3f} [n/a: {len(xs)} runs] (n={len(xs)})"))
+                else:
+                    mark = " *" if ci[0] > 0 or ci[1] < 0 else ""
+                    cells.append(Cell(text=f"{r:.3f} [{ci[0]:.3f}, {ci[1]:.3f}]{mark} (n={len(xs)})"))
         rows.append(Row(["λ_" + a.rsplit(".", 1)[-1], ", ".join(_axis_label(a, v) for v in sorted(res.distinct(a, ids), key=lambda v: float(v) if not is_null(v) else -1))], cells))
     cap = ("Pearson correlation of each lambda (raw value, one point per run, all other lambdas varying) "
-           "with the final mIoU and PSNR of the lambda grid.")
+           "with the final mIoU and PSNR of the lambda grid: r [95 % interval by Fisher's z] (runs); "
+           "* = the interval excludes zero.")
     if len(pairs) == 1:
         cap += f" Scene: {pairs[0][0]}."
     return [Table("lambda_pearson", "Lambda sensitivity (Pearson r)", cap, ["Lambda", "Values"], columns, rows)]

@@ -130,9 +130,12 @@ def test_lambda_pearson(report: Path):
             ys_p.append(24.0 - 10 * ld)
     r_depth = np.corrcoef([x[0] for x in xs], ys_m)[0, 1]  # independent reference
     r_sem = np.corrcoef([x[1] for x in xs], ys_m)[0, 1]
-    assert row_of(rows, "λ_depth")[2] == f"{r_depth:.3f}"
-    assert row_of(rows, "λ_sem")[2] == f"{r_sem:.3f}"
-    assert row_of(rows, "λ_depth")[3] == "-1.000"  # PSNR is linear, decreasing in lambda_depth
+    assert row_of(rows, "λ_depth")[2].startswith(f"{r_depth:.3f} [")
+    assert row_of(rows, "λ_sem")[2].startswith(f"{r_sem:.3f} [")
+    n = len(xs)
+    lo, hi = np.tanh(np.arctanh(r_sem) + np.array([-1.96, 1.96]) / np.sqrt(n - 3))  # Fisher z, by hand
+    assert f"[{lo:.3f}, {hi:.3f}]" in row_of(rows, "λ_sem")[2] and row_of(rows, "λ_sem")[2].endswith(f"(n={n})")
+    assert row_of(rows, "λ_depth")[3].startswith("-1.000 [")  # PSNR is linear, decreasing in lambda_depth
 
 
 # ---------------------------------------------------------------------------- plots and HTML
