@@ -113,7 +113,9 @@ def write_index(path: Path, title: str, source: str, generated: str, sections: l
     body.append("<nav><h2>Contents</h2><ul>" + "".join(f'<li><a href="#{e(s.id)}">{e(s.title)}</a></li>' for s in sections)
                 + '<li><a href="#notes">Notes</a></li><li><a href="#provenance">Provenance</a></li></ul></nav>')
     body.append('<p class="meta">Tables: best value per compared group in <strong>bold</strong>; '
-                "“n/a (reason)” = could not be computed; “–” = no run; mean ± sample std when a cell has several seeds. "
+                "“n/a (reason)” = could not be computed; “–” = no run; mean ± sample std (n = seeds) when a cell has several "
+                "seeds. Difference tables: row minus the study's reference row [95 % interval] (n); * = the interval "
+                "excludes zero. "
                 "Downloads: " + " · ".join(f'<a href="{e(h)}">{e(t)}</a>' for h, t in links) + "</p>")
     for s in sections:
         body.append(f'<section id="{e(s.id)}"><h2>{e(s.title)}</h2>')
