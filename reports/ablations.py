@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
+from gsbench.collect import config_key
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, same
 from gsbench.reports.spec import (
     AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_ORDERING, LOSS_SUBSET_ORDER,
@@ -21,6 +22,7 @@ from gsbench.reports.studies import (
 from gsbench.reports.table import CHECK, Cell, Column, Row, Table
 
 DROPPED_COLUMN = "dropped"
+_NO_CONFIG = config_key(None)  # the config_key of a results.json without a config
 
 
 # ---------------------------------------------------------------------------- dropped settings
@@ -86,8 +88,9 @@ def _group_combos(res: Results, ids: list[str], keys: list[str], combos: list[tu
         rids = [r for r in ids if _same_combo(tuple(_get(res, r, k) for k in keys), c)]
         effs = [_effective(res, r, keys) for r in rids]
         eff = effs[0] if effs and all(_same_combo(e, effs[0]) for e in effs) else None
-        cks = frozenset(str(_get(res, r, "config_key")) for r in rids) if rids and all(
-            _get(res, r, "config_key") for r in rids) else None
+        keys_of = [_get(res, r, "config_key") for r in rids]
+        # a run without a recorded config hashes like every other such run: no evidence of sameness
+        cks = frozenset(map(str, keys_of)) if keys_of and all(k and k != _NO_CONFIG for k in keys_of) else None
         for g in groups:
             if (eff is not None and g[1] is not None and _same_combo(eff, g[1])) or (cks and cks == g[2]):
                 g[0].append(c)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from gsbench.collect import collect
+from gsbench.collect import collect, config_key
 from gsbench.reports.ablations import loss_subsets_table, parse_dropped
 from gsbench.reports.claims import (
     INCONCLUSIVE, NOT_RUN, NOT_TESTABLE, OPPOSITE, PAPER_CLAIMS, REPRODUCED, claims_table, verdict,
@@ -178,3 +178,18 @@ def test_report_lists_dropped_per_run(tmp_path: Path):
     assert html.count("gaussiands.losses.depth: no depth prior; priors.depth: no depth prior") >= 2  # runs list + table
     md = (tmp_path / "rep" / "tables" / "loss_subsets.md").read_text()
     assert "(merged: no depth prior)" in md
+
+
+def test_runs_without_config_are_not_merged(tmp_path: Path):
+    for dep in (False, True):
+        write_run(tmp_path, f"ls/d{int(dep)}", method="gaussiands", scene="bench", study="loss_subsets",
+                  grid={"gaussiands.losses.depth": dep, "gaussiands.losses.tv": False, "gaussiands.losses.ds": False},
+                  metrics={"psnr": 20.0 + dep})
+    df = collect(tmp_path)
+    df["config_key"] = config_key(None)  # as if no run recorded its config
+    (t, _) = loss_subsets_table(Results(df))
+    assert len(t.rows) == 2
+    # one recorded config hash for both cells (the resolver made them one config): merged
+    df["config_key"] = "abc123"
+    (t, _) = loss_subsets_table(Results(df))
+    assert len(t.rows) == 1 and t.rows[0].labels[2].endswith("(merged: same resolved config)")
