@@ -81,3 +81,16 @@ def test_report_plots_shares_and_lists_dropped(tmp_path: Path):
     assert "plots/shares_main.png" in html and "1 of 3 run(s) log no loss_share" in html
     assert "Training budget per method" in html
     assert "Dropped settings: not recorded" in html  # collect does not carry the column yet
+
+
+def test_report_prints_requested_tables(tmp_path: Path, capsys):
+    from gsbench.cli import main
+    _budget_runs(tmp_path / "runs")
+    assert main(["report", str(tmp_path / "runs"), "--out", str(tmp_path / "rep"), "--no-progress",
+                 "--print", "budgets"]) == 0
+    out = capsys.readouterr().out
+    assert "### Training budget per method" in out and "| (standalone) | Two-stage | 500 | 150 |" in out
+    assert main(["report", str(tmp_path / "runs"), "--out", str(tmp_path / "rep"), "--no-progress",
+                 "--print", "paper_claims"]) == 1  # no ablation ran: no claims table
+    err = capsys.readouterr().err
+    assert "no table paper_claims" in err and "(tables: budgets)" in err
