@@ -154,7 +154,7 @@ class Table:
         ncols = nl + len(self.columns)
         out = ["\\begin{table}[ht]", "\\centering",
                f"\\caption{{{_tex(self.caption)}}}", f"\\label{{tab:{self.id}}}",
-               f"\\resizebox{{\\linewidth}}{{!}}{{%",
+               "\\resizebox{\\linewidth}{!}{%",
                f"\\begin{{tabular}}{{{colspec}}}", "\\toprule"]
         if self._has_groups():
             parts = [""] * nl
