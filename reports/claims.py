@@ -23,7 +23,7 @@ from gsbench.reports.spec import (
     AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_ORDERING, metric_spec,
 )
 from gsbench.reports.stats import Diff, compare, pearson, pearson_interval
-from gsbench.reports.studies import PROTOCOL_SHORT, scene_protocols
+from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
 from gsbench.reports.sweeps import lambda_points
 from gsbench.reports.table import Cell, Column, Row, Table
 
@@ -129,21 +129,14 @@ def _select(res: Results, ids: list[str], sel: dict) -> list[str]:
     """Runs among ids whose columns match the selector; MAX picks the highest value present among the
     runs that match the rest of the selector."""
     fixed = {k: v for k, v in sel.items() if v != MAX}
-    out = [r for r in ids if all(same(_col(res, r, k), v) for k, v in fixed.items())]
+    out = [r for r in ids if all(same(_get(res, r, k), v) for k, v in fixed.items())]
     for k, v in sel.items():
         if v == MAX:
-            vals = [float(_col(res, r, k)) for r in out if _col(res, r, k) is not None]
+            vals = [float(_get(res, r, k)) for r in out if _get(res, r, k) is not None]
             if not vals:
                 return []
-            out = [r for r in out if _col(res, r, k) is not None and same(float(_col(res, r, k)), max(vals))]
+            out = [r for r in out if _get(res, r, k) is not None and same(float(_get(res, r, k)), max(vals))]
     return out
-
-
-def _col(res: Results, rid: str, col: str) -> Any:
-    if col not in res.runs.columns:
-        return None
-    v = res.runs.at[rid, col]
-    return None if v is None or (isinstance(v, float) and v != v) else v
 
 
 def _dropped_reason(res: Results, rids: list[str], axes: list[str]) -> str | None:
@@ -173,7 +166,7 @@ def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> tuple[str,
         v = verdict(claim.direction, *ci)
         mark = " *" if (ci[0] > 0 or ci[1] < 0) else ""
         return f"r = {r:+.2f} [{ci[0]:+.2f}, {ci[1]:+.2f}]{mark} (n={len(xs)})", v
-    ids = [r for r in res.run_ids(study=claim.study, scene=scene, protocol=protocol)]
+    ids = res.run_ids(study=claim.study, scene=scene, protocol=protocol)
     a, b = _select(res, ids, claim.row), _select(res, ids, claim.reference)
     va, vb = res.seed_values(a, concrete, sp.scale), res.seed_values(b, concrete, sp.scale)
     if not va or not vb:
