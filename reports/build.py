@@ -1,7 +1,8 @@
 """Write the whole report: collected table, Markdown + LaTeX tables, PNG plots, index.html.
 
-Inputs are only the collected long table (gsbench.collect) and, for the time curves, the
-train_log.jsonl of the runs it lists.
+Inputs are the collected long table (gsbench.collect), the train_log.jsonl of the runs it lists
+(time curves, loss shares), and their results.json for the training budget when the collected
+table does not carry it.
 """
 from __future__ import annotations
 

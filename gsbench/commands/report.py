@@ -1,5 +1,6 @@
 """`gsbench report RUNS_DIR --out REPORT_DIR`: Markdown and LaTeX tables, PNG plots and a static
-index.html, built only from the collected results (and the runs' train_log.jsonl for time curves)."""
+index.html, built from the collected results (plus the runs' train_log.jsonl for curves and loss
+shares, and their results.json for the training budget)."""
 from __future__ import annotations
 
 import argparse
