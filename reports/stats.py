@@ -38,8 +38,17 @@ class Diff:
         return self.has_interval and (self.lo > 0.0 or self.hi < 0.0)  # type: ignore[operator]
 
     def text(self, decimals: int) -> str:
+        """'+d [lo, hi] * (n)'; with more decimals than the metric's when the interval's half-width would
+        otherwise round to zero (a real but tiny difference must not read as '+0.00 [+0.00, +0.00] *')."""
         if self.delta is None:
             return f"n/a ({self.reason})" if self.reason else "–"
+        if self.has_interval:
+            half = (self.hi - self.lo) / 2.0  # type: ignore[operator]
+            # the smallest number that must stay visible: the half-width, and for a marked interval the
+            # bound nearest zero (so "[+0.0000, ...] *" cannot happen)
+            tiny = min([half] + ([min(abs(self.lo), abs(self.hi))] if self.significant else []))  # type: ignore[arg-type]
+            if 0.0 < tiny < 10.0 ** -decimals:
+                decimals = min(max(decimals, 1 - math.floor(math.log10(tiny))), 12)
         s = f"{self.delta:+.{decimals}f}"
         if self.has_interval:
             s += f" [{self.lo:+.{decimals}f}, {self.hi:+.{decimals}f}]"

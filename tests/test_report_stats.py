@@ -104,3 +104,11 @@ def test_pearson_interval_fisher_z():
     r, why = pearson([1, 2, 3, 4], [2, 4, 6, 8.5])
     assert why is None and 0.99 < r <= 1.0
     assert pearson([1, 1, 1], [1, 2, 3]) == (None, "lambda constant")
+
+
+def test_tiny_differences_get_enough_decimals():
+    d = compare({0: 1.0031, 1: 2.0030, 2: 3.0032}, {0: 1.0, 1: 2.0, 2: 3.0})
+    assert d.significant
+    # half-width ~2.5e-4: four decimals at least, never "+0.00 [+0.00, +0.00] *"
+    assert d.text(2).startswith("+0.00310 [+0.00") and d.text(2).endswith("* (n=3, paired)")
+    assert compare({0: 1.0, 1: 2.0}, {0: 1.0, 1: 2.0}).text(2) == "+0.00 [+0.00, +0.00] (n=2, paired)"
