@@ -1,5 +1,6 @@
 """gsbench.reports: tables (Markdown, LaTeX, HTML), plots and a static HTML page built only from
-the collected results (gsbench.collect) and the runs' train_log.jsonl.
+the collected results (gsbench.collect), the runs' train_log.jsonl (curves, loss shares) and, for the
+training budget when the collected table lacks it, the runs' results.json.
 
 Entry point: `build_report(runs_dir_or_collected_file, out_dir) -> ReportSummary`.
 """

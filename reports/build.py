@@ -1,7 +1,8 @@
 """Write the whole report: collected table, Markdown + LaTeX tables, PNG plots, index.html.
 
-Inputs are only the collected long table (gsbench.collect) and, for the time curves, the
-train_log.jsonl of the runs it lists.
+Inputs are the collected long table (gsbench.collect), the train_log.jsonl of the runs it lists
+(time curves, loss shares), and their results.json for the training budget when the collected
+table does not carry it.
 """
 from __future__ import annotations
 
@@ -15,10 +16,17 @@ import pandas as pd
 from gsbench.collect import collect, read_collected, write_collected
 from gsbench.errors import InputError
 from gsbench.reports import html as html_mod
-from gsbench.reports import plots
+from gsbench.reports import plots, shares
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null
 from gsbench.reports.spec import STUDIES
-from gsbench.reports.studies import build_tables
+from gsbench.reports.ablations import (
+    depth_formulation_table, latent_diff_table, loss_subsets_table, method_diff_table, noise_table, ordering_table,
+    other_study_tables,
+)
+from gsbench.reports.budgets import budget_table
+from gsbench.reports.claims import claims_table
+from gsbench.reports.studies import reconstruction_table, removal_table, semantic_table
+from gsbench.reports.sweeps import lambda_table, latent_dim_tables
 from gsbench.reports.table import Table
 from gsbench.store import write_text_atomic
 
@@ -28,8 +36,9 @@ _SECTION_OF = [
     ("ordering", "ordering"), ("depth_formulation", "depth_formulation"), ("loss_subsets", "loss_subsets"),
     ("latent_dim", "latent_dim"), ("lambda_", "lambda_grid"), ("depth_noise", "depth_noise"),
 ]
-_SECTION_TITLES = {"main": "Main results (reconstruction and segmentation)", **{k: v for k, v in STUDIES.items() if k != "reconstruction"}}
-_NO_BARS = ("latent_dim", "lambda_pearson")
+_SECTION_TITLES = {"main": "Main results (reconstruction and segmentation)", **{k: v for k, v in STUDIES.items() if k != "reconstruction"},
+                   "claims": "Paper claims: reproduced or not", "budgets": "Training budget per method"}
+_NO_BARS = ("latent_dim", "lambda_pearson", "paper_claims", "budgets")
 
 
 @dataclass
@@ -105,7 +114,7 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
     for t in it:
         sec = section(t.section or _section_of(t.id))
         sec.tables.append(t)
-        if not t.id.startswith(_NO_BARS):
+        if not t.id.startswith(_NO_BARS) and not t.id.endswith("_diff"):
             p = plots.plot_table_bars(t, plot_dir / f"bars_{t.id}.png")
             if p:
                 summary.plots.append(p)
@@ -134,6 +143,13 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
                                 "front of final value vs total time (one per scene)."))
         else:
             sec.notes.append("No time curve: the runs have neither periodic evaluations nor final values with a training time.")
+        p, notes = shares.plot_loss_shares(res, st if key != "main" else None, ids, plot_dir / f"shares_{_slug(key)}.png")
+        sec.notes += notes
+        if p:
+            summary.plots.append(p)
+            sec.figures.append((p.relative_to(out_dir).as_posix(),
+                                "Loss shares: each weighted loss term's share of the total loss over training steps "
+                                "(train_log.jsonl loss_share), one panel per configuration, mean over its seeds (n)."))
 
     for p in plots.plot_lambda_surfaces(res, plot_dir / "lambda_surfaces"):
         summary.plots.append(p)
@@ -170,7 +186,7 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         for f in sorted(full)[:5]:
             summary.notes.append(f"n/a ({short}) in full: {f}")
 
-    order = ["main"] + [k for k in STUDIES if k != "reconstruction"]
+    order = ["main", "budgets", "claims"] + [k for k in STUDIES if k != "reconstruction"]
     ordered = [sections[k] for k in order if k in sections] + [s for k, s in sections.items() if k not in order]
     links = [("tables.md", "tables (Markdown)"), ("tables.tex", "tables (LaTeX)"),
              (summary.collected.name, f"collected results ({summary.collected.suffix[1:]})")]
@@ -178,6 +194,32 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
     html_mod.write_index(summary.index, "gsbench report", src, generated, ordered, summary.notes, res, links,
                          _writer_version())
     return summary
+
+
+def build_tables(res: Results) -> list[Table]:
+    """Every table that has data, in the paper's order."""
+    tables: list[Table] = []
+    tables += reconstruction_table(res)
+    tables += semantic_table(res, "lerf", ["miou_lerf"], "lerf_miou", "LERF-OVS mIoU per scene",
+                             "Open-vocabulary segmentation on LERF-OVS scenes (mIoU, %; LangSplat protocol).")
+    tables += semantic_table(res, "lerf", ["loc_acc_lerf"], "lerf_loc_acc", "LERF-OVS localization accuracy",
+                             "Localization accuracy on LERF-OVS scenes (%).")
+    tables += semantic_table(res, "3dovs", ["miou_3dovs", "mbiou_3dovs"], "3dovs_miou_mbiou",
+                             "3D-OVS mIoU and mBIoU per scene",
+                             "Boundary-aware semantic segmentation on 3D-OVS scenes (mIoU and boundary mIoU, %).")
+    tables += removal_table(res)
+    tables += method_diff_table(res)
+    tables += ordering_table(res)
+    tables += depth_formulation_table(res)
+    tables += loss_subsets_table(res)
+    tables += latent_dim_tables(res)
+    tables += latent_diff_table(res)
+    tables += lambda_table(res)
+    tables += noise_table(res)
+    tables += other_study_tables(res)
+    tables += claims_table(res)
+    tables += budget_table(res)
+    return tables
 
 
 def _write_tables(tables: list[Table], table_dir: Path, out_dir: Path) -> None:

@@ -53,14 +53,15 @@ class Results:
             self.values[(str(rid), str(m))] = (float(v) if not is_null(v) else math.nan,
                                                None if is_null(reason) else str(reason))
         self.axis_columns = [c for c in df.columns if c.startswith("axis.")]
+        # plain dicts: selecting runs is the report's inner loop, and DataFrame.iterrows is slow
+        self._records = [(str(rid), row) for rid, row in zip(self.runs.index, self.runs.to_dict("records"))]
         self.long_reasons: dict[str, set[str]] = {}  # short reason shown in a cell -> full texts
 
     # ------------------------------------------------------------------ selection
     def run_ids(self, study: Any = "__any__", **eq: Any) -> list[str]:
         """Run ids whose columns equal the given values (study may be a tuple of allowed studies)."""
-        r = self.runs
         out = []
-        for rid, row in r.iterrows():
+        for rid, row in self._records:
             if study != "__any__":
                 allowed = study if isinstance(study, tuple) else (study,)
                 if not any(same(row["study"], s) for s in allowed):
@@ -133,6 +134,23 @@ class Results:
                     self.long_reasons.setdefault(short_reason(r), set()).add(r)
             c.reason = "; ".join(uniq)
         return c
+
+    def seed_values(self, run_ids: list[str], metric: str | None, scale: float = 1.0) -> dict:
+        """Finite values of the finished runs, keyed by seed (run id when the seed is unknown);
+        when two runs share a seed (rows merged because they are one resolved config), the first is kept."""
+        out: dict = {}
+        if metric is None:
+            return out
+        for rid in run_ids:
+            if self.runs.at[rid, "status"] != "done":
+                continue
+            got = self.values.get((rid, metric))
+            if got is None or not math.isfinite(got[0]):
+                continue
+            seed = self.runs.at[rid, "seed"]
+            key = int(seed) if not is_null(seed) else rid
+            out.setdefault(key, got[0] * scale)
+        return out
 
     def mixed_configs(self, run_ids: list[str]) -> bool:
         """True when the runs of one cell differ by more than their seed (config hash or providers)."""

@@ -90,6 +90,17 @@ def runs_html(res: Results) -> str:
     if len(bad):
         items = "".join(f"<li><code>{e(str(r['run_dir']))}</code>: {e(str(r['status']))}</li>" for _, r in bad.iterrows())
         out.append(f"<p>Runs not finished (their values show as n/a):</p><ul>{items}</ul>")
+    if "dropped" in df.columns:
+        dropped = [(r["run_dir"], r["dropped"]) for _, r in df.iterrows()
+                   if not is_null(r["dropped"]) and str(r["dropped"]).strip()]
+        if dropped:
+            items = "".join(f"<li><code>{e(str(d))}</code>: {e(str(t))}</li>" for d, t in dropped)
+            out.append("<p>Settings the resolver dropped (the run trained without them; grid rows that became "
+                       f"the same configuration are merged in the tables):</p><ul>{items}</ul>")
+        else:
+            out.append("<p>The resolver dropped no setting in any run.</p>")
+    else:
+        out.append("<p>Dropped settings: not recorded in the collected table (no 'dropped' column).</p>")
     return "\n".join(out)
 
 
@@ -102,7 +113,9 @@ def write_index(path: Path, title: str, source: str, generated: str, sections: l
     body.append("<nav><h2>Contents</h2><ul>" + "".join(f'<li><a href="#{e(s.id)}">{e(s.title)}</a></li>' for s in sections)
                 + '<li><a href="#notes">Notes</a></li><li><a href="#provenance">Provenance</a></li></ul></nav>')
     body.append('<p class="meta">Tables: best value per compared group in <strong>bold</strong>; '
-                "“n/a (reason)” = could not be computed; “–” = no run; mean ± sample std when a cell has several seeds. "
+                "“n/a (reason)” = could not be computed; “–” = no run; mean ± sample std (n = seeds) when a cell has several "
+                "seeds. Difference tables: row minus the study's reference row [95 % interval] (n); * = the interval "
+                "excludes zero. "
                 "Downloads: " + " · ".join(f'<a href="{e(h)}">{e(t)}</a>' for h, t in links) + "</p>")
     for s in sections:
         body.append(f'<section id="{e(s.id)}"><h2>{e(s.title)}</h2>')

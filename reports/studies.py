@@ -1,4 +1,5 @@
-"""Build the paper's tables from the collected results, one builder per experiment.
+"""Build the paper's main tables (I-III, removal) from the collected results, and the helpers that
+every table builder shares (the ablations live in ablations.py, latent d and lambdas in sweeps.py).
 
 Cell = all runs of one configuration (method, scene, protocol, grid-axis values) that differ only by
 seed: mean +- sample std over seeds. Runs evaluated under different protocols are never averaged
@@ -8,18 +9,15 @@ Builders return [] when the study has no runs, so a report shows only the tables
 """
 from __future__ import annotations
 
-import math
-from typing import Any, Callable
-
-import numpy as np
+from typing import Any
 
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, same
 from gsbench.reports.spec import (
-    AX_FORMULATION, AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_ORDERING,
-    FORMULATION_LABELS, FORMULATION_ORDER, LOSS_SUBSET_ORDER, METHOD_ORDER, NOISE_LABELS, NOISE_ORDER,
-    ORDERING_LABELS, ORDERING_ORDER, PROTOCOL_LABELS, MetricSpec, method_label, metric_spec,
+    AX_FORMULATION, AX_NOISE_TYPE, AX_ORDERING, FORMULATION_LABELS, FORMULATION_ORDER, METHOD_ORDER,
+    NOISE_LABELS, NOISE_ORDER, ORDERING_LABELS, ORDERING_ORDER, PROTOCOL_LABELS, MetricSpec, method_label,
+    metric_spec,
 )
-from gsbench.reports.table import Cell, Column, Row, Table, _mark, _tex
+from gsbench.reports.table import Cell, Column, Row, Table, _tex
 
 PROTOCOL_ORDER = ["3dovs", "lerf", None]
 PROTOCOL_SHORT = {"3dovs": "3D-OVS", "lerf": "LERF-OVS", None: "no protocol"}
@@ -223,106 +221,8 @@ def _method_scene_table(res: Results, ids: list[str], metrics: list[str], tid: s
     return [_finish(t, mixed)]
 
 
-# ---------------------------------------------------------------------------- ablations
-def ablation_table(res: Results, study: str, tid: str, title: str, caption: str, row_axes: list[str],
-                   label_headers: list[str], metrics: list[str], checks: bool = False,
-                   row_sort: Callable[[tuple], Any] | None = None,
-                   row_labels: Callable[[tuple], list[str]] | None = None,
-                   label_headers_latex: list[str] | None = None) -> list[Table]:
-    """Rows = distinct values of the study's axes (plus method and any unexpected varying axis),
-    column groups = scenes (with a mean over the scenes of each protocol), columns = metrics.
-    Logical metrics ('miou', 'mbiou') resolve per protocol; best per column bold."""
-    ids = res.run_ids(study=study)
-    if not ids:
-        return []
-    extra = [c for c in res.axis_columns if c not in row_axes and len(res.distinct(c, ids)) > 1]
-    methods = ordered_methods(res.distinct("method", ids))
-    keys = ["method"] * (len(methods) > 1) + row_axes + extra
-    combos: list[tuple] = []
-    for rid in ids:
-        combo = tuple(_get(res, rid, k) for k in keys)
-        if not any(all(same(a, b) for a, b in zip(combo, c)) for c in combos):
-            combos.append(combo)
-
-    def default_sort(combo: tuple) -> tuple:
-        out = []
-        for k, v in zip(keys, combo):
-            out.append((METHOD_ORDER.index(v) if v in METHOD_ORDER else 9, str(v)) if k == "method" else _axis_rank(k, v))
-        return tuple(out)
-
-    n_method = 1 if len(methods) > 1 else 0
-    if row_sort is None:
-        combos.sort(key=default_sort)
-    else:
-        combos.sort(key=lambda c: (default_sort(c)[:n_method], row_sort(c[n_method:n_method + len(row_axes)]),
-                                   default_sort(c)[n_method + len(row_axes):]))
-
-    pairs = scene_protocols(res, ids)
-    group_cols: list[tuple[str, Any, str]] = []  # (scene, protocol, concrete metric)
-    dropped = []
-    for sc, pr in pairs:
-        sids = runs_of(res, ids, sc, pr)
-        for m in metrics:
-            concrete = res.resolve(m, pr)
-            if concrete is None or not res.has_metric(sids, concrete):
-                dropped.append(f"{metric_spec(m).label.replace(' (%)', '')} on {sc}")
-                continue
-            group_cols.append((sc, pr, m))
-    if not group_cols:
-        return []
-    multi = len(pairs) > 1
-    columns = []
-    for sc, pr, m in group_cols:
-        sp = _spec_for(m)
-        columns.append(Column(m, sp.label, sp.latex, sp.better, group=sc if multi else None))
-    # mean over the scenes of one protocol (never across protocols)
-    mean_groups: list[tuple[Any, str, list[str]]] = []
-    for pr in PROTOCOL_ORDER:
-        scs = [sc for sc, p in pairs if same(p, pr)]
-        if len(scs) < 2:
-            continue
-        for m in metrics:
-            have = [sc for sc, p, mm in group_cols if same(p, pr) and mm == m]
-            if len(have) >= 2:
-                mean_groups.append((pr, m, have))
-                sp = _spec_for(m)
-                columns.append(Column(m, sp.label, sp.latex, sp.better, group=f"Mean ({PROTOCOL_SHORT.get(pr, pr)})"))
-
-    rows, mixed = [], []
-    for combo in combos:
-        eq = dict(zip(keys, combo))
-        cells, by = [], {}
-        for sc, pr, m in group_cols:
-            rids = res.run_ids(study=study, scene=sc, protocol=pr, **_eq_filter(eq, methods))
-            c = _cell(res, rids, res.resolve(m, pr), mixed, f"{sc}/{_combo_text(keys, combo)}", _spec_for(m))
-            by[(sc, m)] = c
-            cells.append(c)
-        for pr, m, scs in mean_groups:
-            cells.append(mean_of_cells([by[(sc, m)] for sc in scs], scs, _spec_for(m).decimals))
-        axis_vals = combo[n_method:n_method + len(row_axes)]
-        labels = row_labels(axis_vals) if row_labels else [_axis_label(k, v) for k, v in zip(row_axes, axis_vals)]
-        checks_l = None
-        if checks:
-            checks_l = [bool(v) for v in axis_vals]
-        prefix = [method_label(combo[0])] if n_method else []
-        extra_l = [_axis_label(k, v) for k, v in zip(extra, combo[n_method + len(row_axes):])]
-        if checks:
-            rows.append(Row(prefix + labels + extra_l, cells, label_checks=None if (prefix or extra_l) else checks_l))
-            if prefix or extra_l:  # mixed label kinds: write check marks as text
-                rows[-1].labels = prefix + [("✓" if v else "") for v in checks_l] + extra_l
-        else:
-            rows.append(Row(prefix + labels + extra_l, cells))
-    heads = (["Method"] if n_method else []) + label_headers + [k.replace("axis.", "") for k in extra]
-    cap = caption
-    if not multi and pairs:
-        cap += f" Scene: {pairs[0][0]} ({PROTOCOL_SHORT.get(pairs[0][1], pairs[0][1])})."
-    t = Table(tid, title, cap, heads, columns, rows, label_is_check=checks and not (n_method or extra))
-    if label_headers_latex and not (n_method or extra):
-        t.label_headers_latex = label_headers_latex
-    if dropped:
-        t.notes.append("Not evaluated, column left out: " + ", ".join(dropped) + ".")
-    t.bold_best_per_column()
-    return [_finish(t, mixed)]
+def _slug(s: str) -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in str(s))
 
 
 def _get(res: Results, rid: str, col: str) -> Any:
@@ -341,204 +241,3 @@ def _eq_filter(eq: dict, methods: list) -> dict:
 
 def _combo_text(keys: list[str], combo: tuple) -> str:
     return ",".join(f"{k.replace('axis.', '')}={_axis_label(k, v)}" for k, v in zip(keys, combo))
-
-
-def ordering_table(res: Results) -> list[Table]:
-    return ablation_table(
-        res, "ordering", "ordering", "Pseudo-video ordering",
-        "Ordering strategies for the pseudo-video: mean adjacent camera-centre distance and mean "
-        "adjacent mask IoU of the propagated masks.",
-        [AX_ORDERING], ["Ordering strategy"], ["ordering_adjacent_distance", "ordering_adjacent_mask_iou"])
-
-
-def depth_formulation_table(res: Results) -> list[Table]:
-    return ablation_table(
-        res, "depth_formulation", "depth_formulation", "Depth supervision formulation",
-        "Ablation of the depth supervision formulation.",
-        [AX_FORMULATION], ["Depth supervision formulation"], ["ssim", "psnr", "lpips", "miou", "mbiou"])
-
-
-def loss_subsets_table(res: Results) -> list[Table]:
-    def order(vals: tuple) -> int:
-        key = tuple(bool(v) if not is_null(v) else False for v in vals)
-        return LOSS_SUBSET_ORDER.index(key) if key in LOSS_SUBSET_ORDER else 99
-    return ablation_table(
-        res, "loss_subsets", "loss_subsets", "Loss subsets",
-        "Ablation of the loss components L_depth, L_tv and L_ds (check mark = term on).",
-        AX_LOSSES, ["L_depth", "L_tv", "L_ds"], ["psnr", "miou"], checks=True, row_sort=order,
-        label_headers_latex=["$\\mathcal{L}_{\\mathrm{depth}}$", "$\\mathcal{L}_{\\mathrm{tv}}$",
-                             "$\\mathcal{L}_{\\mathrm{ds}}$"])
-
-
-def noise_table(res: Results) -> list[Table]:
-    def labels(vals: tuple) -> list[str]:
-        kind, sev = vals
-        if is_null(kind):
-            return ["clean (no noise)", _axis_label(AX_NOISE_SEVERITY, sev if not is_null(sev) else 0)]
-        return [_axis_label(AX_NOISE_TYPE, kind), _axis_label(AX_NOISE_SEVERITY, sev)]
-    return ablation_table(
-        res, "depth_noise", "depth_noise", "Depth-noise robustness",
-        "Noise injected into the depth prior only, by kind and severity (0 = clean).",
-        [AX_NOISE_TYPE, AX_NOISE_SEVERITY], ["Noise", "Severity"], ["psnr", "ssim", "lpips", "miou"],
-        row_labels=labels)
-
-
-# ---------------------------------------------------------------------------- latent d
-LATENT_ROWS = ["train_s", "peak_rss_mb", "miou", "psnr"]
-
-
-def latent_rows(res: Results, ids: list[str]) -> list[str]:
-    """Time, memory (the training process's peak when recorded, else the evaluation's; CUDA too when
-    recorded), mIoU, PSNR."""
-    mem = "train_peak_rss_mb" if res.has_metric(ids, "train_peak_rss_mb") else "peak_rss_mb"
-    rows = ["train_s", mem]
-    if res.has_metric(ids, "train_peak_cuda_mb"):
-        rows.append("train_peak_cuda_mb")
-    return rows + ["miou", "psnr"]
-
-
-def latent_dim_tables(res: Results) -> list[Table]:
-    """Transposed like the paper: columns d = 3, 6, ... and the vanilla reference; rows time,
-    memory, mIoU, PSNR; best per row bold. One table per scene."""
-    ids = res.run_ids(study="latent_dim")
-    if not ids:
-        return []
-    tables = []
-    for sc, pr in scene_protocols(res, ids):
-        sids = runs_of(res, ids, sc, pr)
-        cols: list[tuple[str, Any]] = []  # (method, d)
-        for rid in sids:
-            meth = res.runs.at[rid, "method"]
-            d = _get(res, rid, AX_LATENT) if meth == "gaussiands" else None
-            if not any(m == meth and same(d, x) for m, x in cols):
-                cols.append((meth, d))
-        cols.sort(key=lambda t: (t[0] != "gaussiands", float(t[1]) if t[1] is not None else math.inf, str(t[0])))
-        columns = []
-        for meth, d in cols:
-            lab = (_axis_label(AX_LATENT, d) if d is not None else "default") if meth == "gaussiands" else method_label(meth)
-            columns.append(Column("d", lab, _tex(lab), None))
-        rows, mixed = [], []
-        for m in latent_rows(res, sids):
-            sp = _spec_for(m)
-            cells = []
-            for meth, d in cols:
-                rids = [r for r in sids if res.runs.at[r, "method"] == meth
-                        and (meth != "gaussiands" or same(_get(res, r, AX_LATENT), d))]
-                cells.append(_cell(res, rids, res.resolve(m, pr), mixed, f"{sc}/{meth}/d={d}", sp))
-            rows.append(Row([sp.label], cells))
-            _mark(cells, sp.better)
-        t = Table(f"latent_dim_{_slug(sc)}", f"Latent dimension d ({sc})",
-                  f"Segmentation accuracy and cost across latent dimensions d on {sc} "
-                  f"({PROTOCOL_SHORT.get(pr, pr)}); memory is the peak resident set size of the process "
-                  "(CPU RAM, not VRAM, unless a CUDA row is shown). Best per row in bold.",
-                  ["Latent dimension d"], columns, rows)
-        tables.append(_finish(t, mixed))
-    return tables
-
-
-# ---------------------------------------------------------------------------- lambda grid
-def pearson(x: list[float], y: list[float]) -> tuple[float | None, str | None]:
-    """Pearson r with its undefined cases named instead of NaN."""
-    xa, ya = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
-    ok = np.isfinite(xa) & np.isfinite(ya)
-    xa, ya = xa[ok], ya[ok]
-    if xa.size < 3:
-        return None, f"{xa.size} runs with values (need 3)"
-    sx, sy = float(np.std(xa)), float(np.std(ya))
-    if sx == 0.0:
-        return None, "lambda constant"
-    if sy == 0.0:
-        return None, "metric constant"
-    xc, yc = xa - xa.mean(), ya - ya.mean()
-    denom = math.sqrt(float(np.sum(xc * xc)) * float(np.sum(yc * yc)))
-    if denom <= 0.0:
-        return None, "zero variance"
-    return float(np.clip(np.sum(xc * yc) / denom, -1.0, 1.0)), None
-
-
-def lambda_points(res: Results, scene: str, protocol: Any, axis: str, metric: str) -> tuple[list[float], list[float]]:
-    """(lambda value, metric) per done run of the lambda grid on one scene."""
-    xs, ys = [], []
-    concrete = res.resolve(metric, protocol)
-    if concrete is None or axis not in res.runs.columns:
-        return xs, ys
-    for rid in res.run_ids(study="lambda_grid", scene=scene, protocol=protocol):
-        if res.runs.at[rid, "status"] != "done":
-            continue
-        lam = res.runs.at[rid, axis]
-        v = res.value(rid, concrete)
-        if is_null(lam) or not math.isfinite(v):
-            continue
-        xs.append(float(lam))
-        ys.append(v)
-    return xs, ys
-
-
-def lambda_table(res: Results) -> list[Table]:
-    ids = res.run_ids(study="lambda_grid")
-    if not ids:
-        return []
-    axes = [a for a in AX_LAMBDAS if a in res.runs.columns and len(res.distinct(a, ids)) > 1]
-    if not axes:
-        return []
-    pairs = scene_protocols(res, ids)
-    columns = []
-    for sc, pr in pairs:
-        for m, lab in (("miou", "r with mIoU"), ("psnr", "r with PSNR")):
-            columns.append(Column(m, lab, lab, None, group=sc if len(pairs) > 1 else None))
-    rows = []
-    for a in axes:
-        cells = []
-        for sc, pr in pairs:
-            for m in ("miou", "psnr"):
-                r, why = pearson(*lambda_points(res, sc, pr, a, m))
-                cells.append(Cell(mean=r, n=1, total=1, decimals=3, reason=why))
-        rows.append(Row(["λ_" + a.rsplit(".", 1)[-1], ", ".join(_axis_label(a, v) for v in sorted(res.distinct(a, ids), key=lambda v: float(v) if not is_null(v) else -1))], cells))
-    cap = ("Pearson correlation of each lambda (raw value, one point per run, all other lambdas varying) "
-           "with the final mIoU and PSNR of the lambda grid.")
-    if len(pairs) == 1:
-        cap += f" Scene: {pairs[0][0]}."
-    return [Table("lambda_pearson", "Lambda sensitivity (Pearson r)", cap, ["Lambda", "Values"], columns, rows)]
-
-
-def _slug(s: str) -> str:
-    return "".join(ch if ch.isalnum() else "_" for ch in str(s))
-
-
-def other_study_tables(res: Results) -> list[Table]:
-    """A study without a paper layout (e.g. the `tiny-test` grid): rows = its varying axes,
-    columns = the usual reconstruction and segmentation metrics that its runs carry."""
-    from gsbench.reports.spec import STUDIES
-    tables = []
-    for st in sorted(s for s in res.studies() if s not in MAIN_STUDIES and s not in STUDIES):
-        ids = res.run_ids(study=st)
-        axes = [c for c in res.axis_columns if c != "axis.method" and len(res.distinct(c, ids)) > 1]
-        ts = ablation_table(res, st, f"study_{_slug(st)}", f"Study '{st}'",
-                            f"Runs of study '{st}' by grid axis (no paper layout for this study).",
-                            axes, [a.replace("axis.", "") for a in axes], ["ssim", "psnr", "lpips", "miou", "mbiou"])
-        for t in ts:
-            t.section = f"other_{st}"
-        tables += ts
-    return tables
-
-
-def build_tables(res: Results) -> list[Table]:
-    """Every table that has data, in the paper's order."""
-    tables: list[Table] = []
-    tables += reconstruction_table(res)
-    tables += semantic_table(res, "lerf", ["miou_lerf"], "lerf_miou", "LERF-OVS mIoU per scene",
-                             "Open-vocabulary segmentation on LERF-OVS scenes (mIoU, %; LangSplat protocol).")
-    tables += semantic_table(res, "lerf", ["loc_acc_lerf"], "lerf_loc_acc", "LERF-OVS localization accuracy",
-                             "Localization accuracy on LERF-OVS scenes (%).")
-    tables += semantic_table(res, "3dovs", ["miou_3dovs", "mbiou_3dovs"], "3dovs_miou_mbiou",
-                             "3D-OVS mIoU and mBIoU per scene",
-                             "Boundary-aware semantic segmentation on 3D-OVS scenes (mIoU and boundary mIoU, %).")
-    tables += removal_table(res)
-    tables += ordering_table(res)
-    tables += depth_formulation_table(res)
-    tables += loss_subsets_table(res)
-    tables += latent_dim_tables(res)
-    tables += lambda_table(res)
-    tables += noise_table(res)
-    tables += other_study_tables(res)
-    return tables

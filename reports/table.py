@@ -17,7 +17,8 @@ CHECK = "✓"
 
 @dataclass
 class Cell:
-    """One value in display units: mean (+- sample std when n > 1), or n/a with a reason."""
+    """One value in display units: mean (+- sample std and the number of seeds when n > 1), or n/a
+    with a reason."""
     mean: float | None = None
     std: float | None = None
     n: int = 0               # runs (seeds) with a value
@@ -45,6 +46,8 @@ class Cell:
             s += f" {pm} {self.std:.{self.decimals}f}"
         if self.total > self.n:
             s += f" (n={self.n}/{self.total})"
+        elif self.n > 1:  # several seeds: say how many the mean and std are over
+            s += f" (n={self.n})"
         return s
 
 
@@ -151,7 +154,7 @@ class Table:
         ncols = nl + len(self.columns)
         out = ["\\begin{table}[ht]", "\\centering",
                f"\\caption{{{_tex(self.caption)}}}", f"\\label{{tab:{self.id}}}",
-               f"\\resizebox{{\\linewidth}}{{!}}{{%",
+               "\\resizebox{\\linewidth}{!}{%",
                f"\\begin{{tabular}}{{{colspec}}}", "\\toprule"]
         if self._has_groups():
             parts = [""] * nl

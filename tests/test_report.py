@@ -15,7 +15,9 @@ from gsbench.cli import main
 from gsbench.collect import collect, read_collected, write_collected
 from gsbench.reports.data import Results
 from gsbench.reports.plots import pareto_front, train_curve
-from gsbench.reports.studies import build_tables, pearson, reconstruction_table
+from gsbench.reports.build import build_tables
+from gsbench.reports.stats import pearson
+from gsbench.reports.studies import reconstruction_table
 from gsbench.reports.table import Cell, Column, Row, Table
 from tests.test_report_synthetic import (
     LAMBDA_DEPTH, LAMBDA_SEM, lambda_miou, make_all, make_main, write_run,
@@ -51,7 +53,8 @@ def test_reconstruction_table(report: Path):
     assert bench[1:5] == ["0.600", "20.00", "n/a (no LPIPS weights)", "100.0"]
     assert bench[5:9] == ["0.650", "22.00", "n/a (no LPIPS weights)", "**120.0**"]
     # two seeds: mean and sample std by hand: ssim (0.70, 0.72) -> 0.710 +- 0.0141; psnr (24, 26) -> 25 +- 1.414
-    assert bench[9:13] == ["**0.710 ± 0.014**", "**25.00 ± 1.41**", "n/a (no LPIPS weights)", "100.0 ± 14.1"]
+    assert bench[9:13] == ["**0.710 ± 0.014 (n=2)**", "**25.00 ± 1.41 (n=2)**", "n/a (no LPIPS weights)",
+                          "100.0 ± 14.1 (n=2)"]
     sofa = row_of(rows, "sofa")
     assert sofa[1:5] == ["–"] * 4  # no vanilla run on sofa
     assert sofa[5] == "**0.810**" and sofa[10] == "**26.00**" and sofa[6] == "25.00"
@@ -59,7 +62,7 @@ def test_reconstruction_table(report: Path):
     kitchen = row_of(rows, "waldo_kitchen")
     assert kitchen[7] == "0.250" and kitchen[11] == "**0.200**"  # LPIPS: lower is better
     tex = (report / "tables" / "reconstruction.tex").read_text()
-    assert "\\textbf{25.00 $\\pm$ 1.41}" in tex and "waldo\\_kitchen" in tex
+    assert "\\textbf{25.00 $\\pm$ 1.41 (n=2)}" in tex and "waldo\\_kitchen" in tex
     assert "\\multicolumn{4}{c|}{\\textit{\\textbf{3DGS (vanilla)}}}" in tex
     assert "\\textbf{0.600}" not in tex
 
@@ -68,7 +71,7 @@ def test_semantic_tables(report: Path):
     rows = md_rows(report, "3dovs_miou_mbiou")
     g = row_of(rows, "GaussianDS")
     # bench (0.90, 0.94) -> 92.00 +- 2.83; sofa 98.00; overall mIoU (92 + 98) / 2 = 95.00
-    assert g == ["GaussianDS", "**92.00 ± 2.83**", "**82.00 ± 2.83**", "**98.00**", "**86.00**", "**95.00**", "**84.00**"]
+    assert g == ["GaussianDS", "**92.00 ± 2.83 (n=2)**", "**82.00 ± 2.83 (n=2)**", "**98.00**", "**86.00**", "**95.00**", "**84.00**"]
     t = row_of(rows, "Two-stage")
     assert t[1:] == ["85.00", "70.00", "80.00", "75.00", "82.50", "72.50"]
     v = row_of(rows, "3DGS (vanilla)")
@@ -127,9 +130,12 @@ def test_lambda_pearson(report: Path):
             ys_p.append(24.0 - 10 * ld)
     r_depth = np.corrcoef([x[0] for x in xs], ys_m)[0, 1]  # independent reference
     r_sem = np.corrcoef([x[1] for x in xs], ys_m)[0, 1]
-    assert row_of(rows, "λ_depth")[2] == f"{r_depth:.3f}"
-    assert row_of(rows, "λ_sem")[2] == f"{r_sem:.3f}"
-    assert row_of(rows, "λ_depth")[3] == "-1.000"  # PSNR is linear, decreasing in lambda_depth
+    assert row_of(rows, "λ_depth")[2].startswith(f"{r_depth:.3f} [")
+    assert row_of(rows, "λ_sem")[2].startswith(f"{r_sem:.3f} [")
+    n = len(xs)
+    lo, hi = np.tanh(np.arctanh(r_sem) + np.array([-1.96, 1.96]) / np.sqrt(n - 3))  # Fisher z, by hand
+    assert f"[{lo:.3f}, {hi:.3f}]" in row_of(rows, "λ_sem")[2] and row_of(rows, "λ_sem")[2].endswith(f"(n={n})")
+    assert row_of(rows, "λ_depth")[3].startswith("-1.000 [")  # PSNR is linear, decreasing in lambda_depth
 
 
 # ---------------------------------------------------------------------------- plots and HTML
@@ -163,7 +169,7 @@ def test_html_references_plots_tables_and_provenance(report: Path):
     assert sorted(srcs) == sorted(f"plots/{p.name}" for p in (report / "plots").glob("*.png"))
     for s in srcs:
         assert (report / s).is_file()
-    assert "<strong>25.00 ± 1.41</strong>" in html and "n/a (no LPIPS weights)" in html
+    assert "<strong>25.00 ± 1.41 (n=2)</strong>" in html and "n/a (no LPIPS weights)" in html
     for t in ("reconstruction", "3dovs_miou_mbiou", "loss_subsets", "latent_dim_waldo_kitchen", "depth_noise"):
         assert f'id="tab-{t}"' in html
     prov = html[html.index('id="provenance"'):]
@@ -184,13 +190,17 @@ def test_partial_runs_dir(tmp_path: Path):
     out = tmp_path / "rep"
     from gsbench.reports import build_report
     s = build_report(root, out)
-    assert s.tables == ["ordering"]
+    assert s.tables == ["ordering", "ordering_diff", "paper_claims", "budgets"]
     html = (out / "index.html").read_text()
     note = re.search(r"No runs for: ([^<]*)", html).group(1)
     for st in ("main results", "depth_formulation", "loss_subsets", "latent_dim", "lambda_grid", "depth_noise"):
         assert st in note
     assert "ordering" not in note.replace("main results", "")
     assert md_rows(out, "ordering") == [["Random", "4.000", "25.00"], ["Pose-nearest", "**1.000**", "**50.00**"]]
+    # one seed per row: a difference, but its interval is n/a, never of zero width
+    assert md_rows(out, "ordering_diff") == [
+        ["Random", "+3.000 [n/a: one seed] (n=1, paired)", "-25.00 [n/a: one seed] (n=1, paired)"],
+        ["Pose-nearest", "reference", "reference"]]
     assert not (out / "tables" / "reconstruction.md").exists()
 
 
@@ -210,7 +220,7 @@ def test_protocols_never_averaged(tmp_path: Path):
     (t,) = reconstruction_table(Results(collect(root)))
     psnr = t.columns.index(next(c for c in t.columns if c.metric == "psnr"))
     got = [(r.section, r.labels[0], r.cells[psnr].plain()) for r in t.rows]
-    assert got == [("3D-OVS protocol", "bench", "20.00"), ("LERF-OVS protocol", "bench", "29.00 ± 1.41")]
+    assert got == [("3D-OVS protocol", "bench", "20.00"), ("LERF-OVS protocol", "bench", "29.00 ± 1.41 (n=2)")]
 
 
 def test_partial_seeds_and_mixed_configs(tmp_path: Path):
@@ -231,12 +241,12 @@ def test_collected_file_gives_same_tables(tmp_path: Path):
     path = write_collected(df, root)
     a = [t.to_markdown() for t in build_tables(Results(df))]
     b = [t.to_markdown() for t in build_tables(Results(read_collected(path)))]
-    assert a == b and len(a) == 3
+    assert a == b and len(a) == 4  # with the budget table
 
 
 def test_cell_format_and_bold_rules():
     assert Cell(mean=1.23456, decimals=2, n=1, total=1).plain() == "1.23"
-    assert Cell(mean=1.0, std=0.5, n=3, total=3, decimals=1).plain() == "1.0 ± 0.5"
+    assert Cell(mean=1.0, std=0.5, n=3, total=3, decimals=1).plain() == "1.0 ± 0.5 (n=3)"
     assert Cell(reason="no LPIPS weights").plain() == "n/a (no LPIPS weights)"
     assert Cell().plain() == "–"
     cols = [Column("psnr", "PSNR", "PSNR", "higher"), Column("lpips", "LPIPS", "LPIPS", "lower")]
@@ -323,9 +333,14 @@ def test_unknown_study_gets_generic_table(tmp_path: Path):
                       grid={"gaussiands.latent_dim": d, "gaussiands.losses.ds": ds},
                       metrics={"psnr": 20.0 + d + ds, "miou_3dovs": 0.1 * d})
     tables = build_tables(Results(collect(root)))
-    assert [t.id for t in tables] == ["study_tiny_test"]
+    assert [t.id for t in tables] == ["study_tiny_test", "study_tiny_test_diff", "budgets"]
     t = tables[0]
     assert t.label_headers == ["gaussiands.latent_dim", "gaussiands.losses.ds"] and t.section == "other_tiny-test"
     got = [(r.labels, [c.plain() for c in r.cells]) for r in t.rows]
     assert got == [(["3", "False"], ["23.00", "30.00"]), (["3", "True"], ["24.00", "30.00"]),
                    (["6", "False"], ["26.00", "60.00"]), (["6", "True"], ["27.00", "60.00"])]
+    diff = tables[1]  # reference: d = 3 with L_ds on
+    assert diff.section == "other_tiny-test"
+    assert [r.cells[0].plain() for r in diff.rows] == [
+        "-1.00 [n/a: one seed] (n=1, paired)", "reference", "+2.00 [n/a: one seed] (n=1, paired)",
+        "+3.00 [n/a: one seed] (n=1, paired)"]

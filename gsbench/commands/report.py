@@ -1,5 +1,6 @@
 """`gsbench report RUNS_DIR --out REPORT_DIR`: Markdown and LaTeX tables, PNG plots and a static
-index.html, built only from the collected results (and the runs' train_log.jsonl for time curves)."""
+index.html, built from the collected results (plus the runs' train_log.jsonl for curves and loss
+shares, and their results.json for the training budget)."""
 from __future__ import annotations
 
 import argparse
@@ -12,12 +13,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="runs folder (collected now), or a collected.parquet / collected.csv file")
     parser.add_argument("--out", type=Path, required=True, help="report folder (index.html, tables/, plots/)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--print", dest="print_tables", nargs="+", metavar="TABLE_ID", default=[],
+                        help="print these tables (Markdown) after building, e.g. paper_claims loss_subsets_diff")
 
 
 def run(args: argparse.Namespace) -> int:
+    from gsbench.errors import InputError
     from gsbench.reports.build import build_report
 
     summary = build_report(args.runs_dir, args.out, progress=not args.no_progress)
+    unknown = [t for t in args.print_tables if t not in summary.tables]
+    if unknown:
+        raise InputError(f"{args.runs_dir}: no table {', '.join(unknown)} in this report "
+                         f"(tables: {', '.join(summary.tables) or 'none'})")
+    for t in args.print_tables:
+        print((summary.out_dir / "tables" / f"{t}.md").read_text(encoding="utf-8"))
     for n in summary.notes:
         print(f"gsbench report: note: {n}", file=sys.stderr)
     print(f"{len(summary.tables)} tables ({', '.join(summary.tables) or 'none'}), {len(summary.plots)} plots")

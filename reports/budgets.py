@@ -1,0 +1,93 @@
+"""The training budget of every method in the report: iterations and semantic steps per study and
+method, so a reader sees whether the methods compared had the same number of steps.
+
+Source, in this order: the collected columns budget.<key> (results.json `budget` flattened by
+collect), the run's results.json `budget` dict, else the run's resolved config (train.iterations;
+semantic steps: twostage.semantic_iterations for twostage, every joint step for gaussiands, none for
+vanilla). The source is shown per row.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+from gsbench.reports.data import Results, is_null
+from gsbench.reports.spec import method_label
+from gsbench.reports.studies import ordered_methods
+from gsbench.reports.table import Cell, Column, Row, Table
+from gsbench.store import read_json
+
+log = logging.getLogger(__name__)
+JOINT_SEMANTICS = ("gaussiands",)  # the semantic field is optimised at every training step
+NO_SEMANTICS = ("vanilla",)
+
+
+def _int(v: Any) -> int | None:
+    if is_null(v) or isinstance(v, bool):
+        return None
+    try:
+        return int(v)
+    except (TypeError, ValueError):
+        return None
+
+
+def run_budget(res: Results, rid: str) -> tuple[int | None, int | None, str]:
+    """(iterations, semantic steps, source) of one run; None where unknown or not applicable."""
+    cols = res.runs.columns
+    if "budget.iterations" in cols and not is_null(res.runs.at[rid, "budget.iterations"]):
+        sem = res.runs.at[rid, "budget.semantic_iterations"] if "budget.semantic_iterations" in cols else None
+        return _int(res.runs.at[rid, "budget.iterations"]), _int(sem), "results budget"
+    path = Path(str(res.runs.at[rid, "run_dir"])) / "results.json"
+    try:
+        data = read_json(path)
+    except Exception as exc:  # a collected table read without its run folders
+        log.debug("%s: no budget (%s)", path, exc)
+        return None, None, "unknown (results.json not readable)"
+    if not isinstance(data, dict):
+        return None, None, "unknown (results.json not an object)"
+    budget = data.get("budget")
+    if isinstance(budget, dict) and "iterations" in budget:
+        return _int(budget.get("iterations")), _int(budget.get("semantic_iterations")), "results budget"
+    cfg = data.get("config") if isinstance(data.get("config"), dict) else {}
+    train = cfg.get("train") if isinstance(cfg.get("train"), dict) else {}
+    it = _int(train.get("iterations"))
+    method = str(res.runs.at[rid, "method"])
+    if method in NO_SEMANTICS:
+        sem = None
+    elif method in JOINT_SEMANTICS:
+        sem = it
+    else:
+        two = cfg.get("twostage") if isinstance(cfg.get("twostage"), dict) else {}
+        sem = _int(two.get("semantic_iterations"))
+    return it, sem, "resolved config" if it is not None else "unknown (no train.iterations)"
+
+
+def budget_table(res: Results) -> list[Table]:
+    """One row per (study, method, budget): iterations, semantic steps, source, number of runs."""
+    rows = []
+    studies = sorted(res.studies(), key=lambda s: (s is not None, str(s)))
+    for st in studies:
+        ids = res.run_ids(study=st)
+        for meth in ordered_methods(res.distinct("method", ids)):
+            seen: dict[tuple, int] = {}
+            for rid in ids:
+                if res.runs.at[rid, "method"] == meth:
+                    key = run_budget(res, rid)
+                    seen[key] = seen.get(key, 0) + 1
+            for (it, sem, src), n in seen.items():
+                sem_text = ("– (no semantic field)" if meth in NO_SEMANTICS else
+                            "n/a (unknown)" if sem is None else
+                            f"{sem} (joint)" if meth in JOINT_SEMANTICS and src == "resolved config" else str(sem))
+                rows.append(Row(["(standalone)" if st is None else str(st), method_label(meth)],
+                                [Cell(text=str(it) if it is not None else "n/a (unknown)"), Cell(text=sem_text),
+                                 Cell(text=src), Cell(text=str(n))]))
+    if not rows:
+        return []
+    cols = [Column("iterations", "Iterations", "Iterations"), Column("semantic", "Semantic steps", "Semantic steps"),
+            Column("source", "Source", "Source"), Column("runs", "Runs", "Runs")]
+    return [Table("budgets", "Training budget per method",
+                  "Training steps of each method per study: iterations (RGB / joint) and semantic steps "
+                  "(twostage: its semantic stage after the RGB stage; GaussianDS: every joint step trains the "
+                  "semantic field; vanilla: none).",
+                  ["Study", "Method"], cols, rows, section="budgets")]
