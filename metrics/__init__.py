@@ -85,7 +85,7 @@ METRIC_IMPL: dict[str, str] = {
     "miou_3dovs": OVS3D_IMPL,
     "mbiou_3dovs": OVS3D_IMPL + "+" + BIOU_IMPL,
     "pixel_acc_3dovs": OVS3D_IMPL + "+" + PIXEL_ACC_IMPL["reference"],
-    "pixel_acc_3dovs_labelled": OVS3D_IMPL + "+" + PIXEL_ACC_IMPL["labelled"],
+    "pixel_acc_labelled_3dovs": OVS3D_IMPL + "+" + PIXEL_ACC_IMPL["labelled"],
     "miou_3dovs_encode": OVS3D_IMPL,
     "miou_3dovs_decode": OVS3D_IMPL,
     "mbiou_3dovs_encode": OVS3D_IMPL + "+" + BIOU_IMPL,

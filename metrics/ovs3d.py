@@ -10,7 +10,7 @@ view counts as an empty GT mask (every scene class is scored in every view).
 mIoU / mBIoU = plain mean over views x classes.
 Pixel accuracy, two named rules (`pixel_accuracy`): "reference" (pixel_acc_3dovs), exact
 one-hot match over all H x W pixels as the reference scores it; "labelled"
-(pixel_acc_3dovs_labelled), gsbench's variant over GT-covered pixels. Scene value = mean over views.
+(pixel_acc_labelled_3dovs), gsbench's variant over GT-covered pixels. Scene value = mean over views.
 """
 from __future__ import annotations
 
