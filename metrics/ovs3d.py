@@ -17,7 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
-import cv2
 import numpy as np
 
 from gsbench.errors import InputError
