@@ -146,3 +146,37 @@ def test_query_modes_have_different_ids():
     from gsbench.results import seg_metric
     assert seg_metric("miou", "lerf", "decode", "held-out") == "miou_lerf_decode_heldout"
     assert seg_metric("pixel_acc", "3dovs") == "pixel_acc_3dovs"
+
+
+TINY = ["backend=cpu", "train.iterations=20", "train.max_width=32", "train.eval_every=0", "train.log_every=5",
+        "train.checkpoint_every=0", "train.eval_views=0", "train.densify.from_iter=5", "train.densify.interval=10",
+        "train.densify.until_iter=15", "train.densify.max_gaussians=800", "gaussiands.autoencoder.epochs=10",
+        "train.init.max_points=300", "priors.masks.provider=gt"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("holdout", ["every-8", "none"])
+def test_evaluate_run_scores_every_labelled_frame(tmp_path, holdout):
+    """End to end on a tiny run: every label file is scored under reference or held-out and listed
+    in results.json; holdout none skips the reconstruction metrics with a reason; query modes have
+    their own ids; the resolution of each frame set is recorded."""
+    from gsbench.config import load_config
+    from gsbench.datasets.synthetic import make_scene
+    from gsbench.evaluation import evaluate_run
+    from gsbench.runs import train_run
+    scene = make_scene("tabletop-small", tmp_path / "s", seed=0, views=10, resolution=(48, 36))
+    cfg = load_config("gaussiands", "cpu-small", TINY + [f"train.holdout={holdout}"])
+    run = train_run(cfg, scene, tmp_path / "run", progress=False)
+    res = evaluate_run(run, progress=False)
+    n_labels = len(list((scene / "label" / "tabletop-small").glob("*.json")))
+    for p in ("lerf", "3dovs"):
+        scored = res["frames"].get(f"{p}/reference", []) + res["frames"].get(f"{p}/held-out", [])
+        assert len(scored) == len(set(scored)) == n_labels == 10
+        assert res["resolution"][f"{p}/reference"] == "48x36"
+    assert res["metric_impl"]["miou_lerf_encode"] != res["metric_impl"]["miou_lerf_decode"]
+    if holdout == "none":
+        assert res["metrics"]["psnr"] is None and "holdout" in res["skipped"]["psnr"]
+        assert res["metrics"]["miou_lerf_heldout"] is None and res["skipped"]["miou_lerf_heldout"]
+        assert len(res["frames"]["lerf/reference"]) == 10
+    else:
+        assert res["metrics"]["psnr"] is not None and len(res["frames"]["lerf/held-out"]) == 2
