@@ -4,7 +4,7 @@ Why a long table: ablation grids vary different axes, and a report needs to slic
 them; one row per (run, metric) with one `axis.<key>` column per grid axis is the simplest shape
 that pandas can pivot into every table of the paper.
 
-Columns (the interface in TEAM.md, plus a few extras the report needs):
+Columns (what the reports read, plus a few extras):
   run_id, run_dir, study, method, scene, seed, status, protocol, backend,
   provider.depth, provider.masks, provider.features (and provider.<other> when results carry it),
   axis.<key> for every grid axis seen in any run - the value in the RESOLVED config (what the run

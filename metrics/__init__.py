@@ -1,8 +1,8 @@
 """gsbench.metrics: pure evaluation functions on numpy arrays / torch tensors.
 
 Every number a result records names the implementation that produced it: the ids are in
-`METRIC_IMPL` (metric name of store.py -> id) and in each function's result. Protocols follow
-shared/EVAL_PROTOCOLS.md; the module docstrings state every rule (borders, empty masks, ties).
+`METRIC_IMPL` (metric name of gsbench.results -> id) and in each function's result. The protocols
+are described in docs/protocols.md; the module docstrings state every rule (borders, empty masks, ties).
 Bad input raises gsbench.errors.InputError. Images are (H, W) or (H, W, C) in [0, 1].
 
 Image metrics (image.py, perceptual.py)
@@ -68,7 +68,7 @@ from .perceptual import (LPIPS_RANGES, LPIPSNet, LPIPSResult, build_lpips_networ
 from .segmentation import BIOU_IMPL, IOU_IMPL, boundary_band, boundary_iou, boundary_width, iou, mbiou, miou
 from .timing import FPS_IMPL, time_fps
 
-#: metric name (store.py METRIC NAMES) -> implementation id of the default settings.
+#: metric name (gsbench.results.METRIC_NAMES) -> implementation id of the default settings.
 #: A caller that changes a setting (quantize=False, border="zeropad", net="alex", ...) records
 #: the id of that setting: PSNR_IMPL[quantize], SSIM_IMPL[border], lpips_impl(net).
 METRIC_IMPL: dict[str, str] = {

@@ -1,4 +1,4 @@
-"""LERF-OVS evaluation, the LangSplat protocol (EVAL_PROTOCOLS.md, "LERF-OVS").
+"""LERF-OVS evaluation, the LangSplat protocol (docs/protocols.md).
 
 Per frame and text query, for each feature level l (LangSplat renders 3 SAM levels; a method
 with one level passes one map):

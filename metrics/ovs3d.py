@@ -1,4 +1,4 @@
-"""3D-OVS evaluation (EVAL_PROTOCOLS.md, "3D-OVS").
+"""3D-OVS evaluation (docs/protocols.md).
 
 Prediction: per pixel, argmax over the scene's classes of cos(feature, text_c); no background
 class, no threshold (`ovs3d_predict`). GT: one binary mask per class (foreground where the PNG
