@@ -180,3 +180,45 @@ def test_evaluate_run_scores_every_labelled_frame(tmp_path, holdout):
         assert len(res["frames"]["lerf/reference"]) == 10
     else:
         assert res["metrics"]["psnr"] is not None and len(res["frames"]["lerf/held-out"]) == 2
+
+
+def test_eval_protocol_key_is_read():
+    """eval.protocol used to change the run id without being read by anything."""
+    from gsbench.evaluation.run import requested_protocol
+    assert requested_protocol(None, {"eval": {"protocol": "lerf"}}) == "lerf"
+    assert requested_protocol("3dovs", {"eval": {"protocol": "lerf"}}) == "3dovs"
+    assert requested_protocol(None, {}) == "auto"
+
+
+class _Out:
+    def __init__(self, rgb):
+        self.rgb = rgb
+
+
+class _ExactUpToRounding:
+    """A method whose render is the GT image plus noise below half an 8-bit step."""
+
+    def __init__(self, scene):
+        self.scene = scene
+        self.rng = np.random.default_rng(0)
+
+    def render(self, cam):
+        i = next(k for k, c in enumerate(self.scene.cameras) if c.name == cam.name)
+        gt = np.asarray(self.scene.image(i), np.float64)
+        q = np.floor(gt * 255 + 0.5) / 255
+        return _Out(q + self.rng.uniform(-0.4, 0.4, q.shape) / 255)
+
+
+def test_ssim_reads_quantised_renders(lerf_scene):
+    """SSIM (like PSNR) is computed on the 8-bit values: a render equal to the GT up to rounding
+    scores exactly 1 (the old code fed the float render to SSIM and read below 1)."""
+    from gsbench.evaluation.image import image_metrics
+    from gsbench.metrics import ssim
+    ids = [0, 8]
+    cams = [lerf_scene.cameras[i] for i in ids]
+    b = image_metrics(_ExactUpToRounding(lerf_scene), lerf_scene, ids, cams, _cfg())
+    assert b.metrics["ssim"] == pytest.approx(1.0, abs=1e-12)
+    assert b.metrics["psnr"] == pytest.approx(100.0)
+    assert b.metric_impl["ssim"].endswith("+uint8-input")
+    raw = _ExactUpToRounding(lerf_scene).render(cams[0]).rgb
+    assert ssim(np.clip(raw, 0, 1), lerf_scene.image(0)) < 1.0 - 1e-6

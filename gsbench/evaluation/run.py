@@ -68,6 +68,11 @@ def _memory(summary: dict) -> dict:
     return memory
 
 
+def requested_protocol(protocol: Optional[str], config: dict) -> str:
+    """The protocol argument when given, else the run config's eval.protocol (default auto)."""
+    return protocol or (config.get("eval") or {}).get("protocol") or "auto"
+
+
 def evaluate_run(run_dir: str | os.PathLike, protocol: Optional[str] = None, progress: bool = True) -> dict:
     """Evaluate a trained run and write run_dir/results.json (schema: gsbench.results).
     protocol None = the run config's eval.protocol."""
@@ -77,7 +82,7 @@ def evaluate_run(run_dir: str | os.PathLike, protocol: Optional[str] = None, pro
     run_dir = Path(run_dir)
     t_start = time.time()
     method, config, scene = load_run(run_dir)
-    protocol = protocol or (config.get("eval") or {}).get("protocol", "auto")
+    protocol = requested_protocol(protocol, config)
     mode = query_mode(config)
     fs = frame_sets(scene, config)
     max_width = (config.get("train") or {}).get("max_width")
