@@ -222,3 +222,11 @@ def test_ssim_reads_quantised_renders(lerf_scene):
     assert b.metric_impl["ssim"].endswith("+uint8-input")
     raw = _ExactUpToRounding(lerf_scene).render(cams[0]).rgb
     assert ssim(np.clip(raw, 0, 1), lerf_scene.image(0)) < 1.0 - 1e-6
+
+
+def test_bad_lpips_input_is_a_config_error_not_a_skip(lerf_scene):
+    from gsbench.evaluation.image import image_metrics
+    cfg = _cfg()
+    cfg["eval"]["lpips_input"] = "[0,255]"
+    with pytest.raises(InputError, match="eval.lpips_input"):
+        image_metrics(_ExactUpToRounding(lerf_scene), lerf_scene, [0], [lerf_scene.cameras[0]], cfg)

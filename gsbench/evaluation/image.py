@@ -39,6 +39,8 @@ def image_metrics(method, scene, ids: list[int], cams: list, config: dict, progr
     ev = config.get("eval") or {}
     net = ev.get("lpips_net", "vgg")
     rng = ev.get("lpips_input", MP.LPIPS_DEFAULT_RANGE)
+    if rng not in MP.LPIPS_RANGES:   # a config error, not a skip: checked before any render
+        raise InputError(f"eval.lpips_input must be one of {', '.join(MP.LPIPS_RANGES)}, got {rng!r}")
     names = [view_name(scene, i) for i in ids]
     vals: dict[str, list] = {"psnr": [], "ssim": [], "lpips": []}
     lpips_reason, lpips_impl = None, None
