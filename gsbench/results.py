@@ -6,11 +6,12 @@ write the same schema, and the reports read names from here instead of the other
 results.json keys (reports read only these):
   results_version, run_id, method, scene, scene_path, seed, study, grid {axis: value}, config,
   providers {"depth", "masks", "features"}, backend, protocol, protocols [..], query_mode,
-  metric_impl {metric: id}, metrics {metric: float | None}, per_view {metric: [float | None]},
-  view_names [..], skipped {metric: reason}  (every null metric has one; keys are metric names),
+  metric_impl {metric: id}, metrics {metric: float | None}, per_view {metric: [float | None]}
+  (in the order of the metric's frame set in `frames`), view_names [..] (the reconstruction views),
+  skipped {metric: reason}  (every null metric has one; keys are metric names),
   notes {topic: text}  (what was left out that is not a metric: views without GT, ...),
   frames {frame set: [frame names]}, frames_skipped {frame name: reason},
-  resolution {frame set or protocol: "WxH" | "label"}, timings, memory, machine, status, dropped.
+  resolution {frame set: "WxH"}, timings, memory, machine, status, dropped.
 
 Metric names are built from parts (see `METRIC_NAMES`): a segmentation metric is
 <base>_<protocol>[_<query mode>][_heldout]; the plain name is the configured query mode on the

@@ -82,7 +82,8 @@ def score_3dovs(method, scene, ids: list[int], config: dict, mode: str, configur
         cam = segmentation_camera(scene, i, "3dovs", config)
         gt = class_masks(scene, i, classes, cam.width, cam.height)
         feats = _features(method, cam, mode)
-        views.append(ovs3d.Ovs3dView(view_name(scene, i), None if feats is None else ovs3d.ovs3d_predict(feats, text), gt))
+        pred = None if feats is None else ovs3d.ovs3d_predict(feats, text)
+        views.append(ovs3d.Ovs3dView(view_name(scene, i), pred, gt))
         cams.append(cam)
     r = ovs3d.evaluate_ovs3d_scene(views, classes, missing="error", dilation_ratio=ratio)
     impl = f"{r.impl}+{ovs3d.PIXEL_ACC_IMPL['reference']}"
