@@ -3,6 +3,7 @@ Each test fails on the pre-package behaviour it replaces (named in its docstring
 from __future__ import annotations
 
 import math
+import zlib
 
 import numpy as np
 import pytest
@@ -230,3 +231,32 @@ def test_bad_lpips_input_is_a_config_error_not_a_skip(lerf_scene):
     cfg["eval"]["lpips_input"] = "[0,255]"
     with pytest.raises(InputError, match="eval.lpips_input"):
         image_metrics(_ExactUpToRounding(lerf_scene), lerf_scene, [0], [lerf_scene.cameras[0]], cfg)
+
+
+class _RandomSemantics:
+    """Seeded random features and text embeddings: enough to drive the protocol code."""
+
+    def embed_text(self, texts, mode):
+        return np.stack([np.random.default_rng(zlib.crc32(f"{t}|{mode}".encode())).normal(size=4) for t in texts])
+
+    def semantic_features(self, cam, mode):
+        return np.random.default_rng(cam.width).normal(size=(cam.height, cam.width, 4))
+
+
+def test_lerf_scoring_ids_sizes_and_frames(lerf_scene):
+    """Each query mode has its own id; the plain name is the configured mode; frames and the label
+    size are recorded; the kernels scaled to the 64 px labels are named in the id."""
+    from gsbench.evaluation.segmentation import score_lerf
+    cfg = {"train": {"max_width": 32}, "eval": {}}
+    ids = [1, 2, 3]
+    enc = score_lerf(_RandomSemantics(), lerf_scene, ids, cfg, "encode", "encode", "reference")
+    dec = score_lerf(_RandomSemantics(), lerf_scene, ids, cfg, "decode", "encode", "reference")
+    assert enc.metric_impl["miou_lerf_encode"] != dec.metric_impl["miou_lerf_decode"]
+    assert enc.metric_impl["miou_lerf_encode"].endswith("+query-encode")
+    assert "kernels-scaled-box2-maj3" in enc.metric_impl["miou_lerf"]
+    assert "miou_lerf" in enc.metrics and "miou_lerf" not in dec.metrics
+    assert enc.frames["lerf/reference"] == [lerf_scene.cameras[i].name for i in ids]
+    assert enc.resolution["lerf/reference"] == "64x48"
+    assert len(enc.per_view["miou_lerf"]) == 3
+    held = score_lerf(_RandomSemantics(), lerf_scene, [], cfg, "encode", "encode", "held-out")
+    assert held.metrics["miou_lerf_heldout"] is None and "held-out" in held.skipped["miou_lerf_heldout"]
