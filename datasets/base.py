@@ -54,6 +54,8 @@ class Scene:
     class_masks_loader: Optional[Callable[[int], Optional[dict]]] = None  # 3D-OVS: {class: bool HxW} or None
     semantic_view_ids: list[int] = field(default_factory=list)  # views with 3D-OVS class GT
     label_view_ids: list[int] = field(default_factory=list)     # views with a LERF label file
+    label_sizes: dict = field(default_factory=dict)             # view -> (W, H) of its label file (LERF eval size)
+    raw_labels: dict = field(default_factory=dict)              # view -> label objects in the label file's pixels
     removable_instances: list[int] = field(default_factory=list)  # instance ids with removal GT
     instance_names: dict = field(default_factory=dict)          # instance id -> name (e.g. "mug")
 

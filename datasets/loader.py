@@ -184,6 +184,8 @@ def _attach_lerf(scene: Scene, root: Path) -> None:
         info, objs = ovs.read_lerf_label(f)
         cam = scene.cameras[i]
         w, h = info.get("width"), info.get("height")
+        scene.label_sizes[i] = (int(w), int(h)) if w is not None and h is not None else (cam.width, cam.height)
+        scene.raw_labels[i] = objs
         if w is not None and h is not None and (int(w), int(h)) != (cam.width, cam.height):
             sx, sy = cam.width / float(w), cam.height / float(h)
             if abs(sx - sy) > 0.01 * max(sx, sy):

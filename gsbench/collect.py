@@ -4,13 +4,15 @@ Why a long table: ablation grids vary different axes, and a report needs to slic
 them; one row per (run, metric) with one `axis.<key>` column per grid axis is the simplest shape
 that pandas can pivot into every table of the paper.
 
-Columns (the interface in TEAM.md, plus a few extras the report needs):
+Columns (what the reports read, plus a few extras):
   run_id, run_dir, study, method, scene, seed, status, protocol, backend,
   provider.depth, provider.masks, provider.features (and provider.<other> when results carry it),
-  axis.<key> for every grid axis seen in any run, metric, value (float, NaN = not computed),
-  metric_impl,
+  axis.<key> for every grid axis seen in any run - the value in the RESOLVED config (what the run
+  really used: a loss the resolver switched off reads False even when the grid asked for True),
+  requested.<key> (the value the grid asked for), dropped ("key: reason; ..." of what the resolver
+  left out, "" when nothing), metric, value (float, NaN = not computed), metric_impl,
   extras: protocols (comma-joined list of the protocols the run was evaluated under),
-  reason (why the value is missing, from results' `skipped`), source ("metrics" | "timings" |
+  reason (why the value is missing: results' `skipped` entry of that metric name), source ("metrics" | "timings" |
   "memory"), config_key (hash of the resolved config without seed, run id and paths: runs that
   differ only by seed share it), machine.<key> (host, cpu, cores, torch, ...), env.<key>
   (git_sha, platform, ... from the run's env.json when it exists: provenance only).
@@ -30,11 +32,12 @@ from typing import Any
 import pandas as pd
 
 from gsbench.errors import InputError
+from gsbench.results import KNOWN_METRICS
 from gsbench.store import read_json, write_bytes_atomic, write_text_atomic
 
 BASE_COLUMNS = [
     "run_id", "run_dir", "study", "method", "scene", "seed", "status", "protocol", "backend",
-    "provider.depth", "provider.masks", "provider.features",
+    "provider.depth", "provider.masks", "provider.features", "dropped",
 ]
 TAIL_COLUMNS = ["metric", "value", "metric_impl", "reason", "source", "config_key"]
 REQUIRED_KEYS = ("run_id", "method", "scene", "metrics")
@@ -88,62 +91,36 @@ def config_key(config: Any) -> str:
     return hashlib.sha1(text.encode("utf-8")).hexdigest()[:10]
 
 
-# `skipped` keys that name a group of metrics rather than one metric.
-SKIP_FAMILIES = {
-    "semantics": ("miou", "mbiou", "pixel_acc", "loc_acc", "removal"),
-    "semantic": ("miou", "mbiou", "pixel_acc", "loc_acc", "removal"),
-    "segmentation": ("miou", "mbiou", "pixel_acc", "loc_acc"),
-    "query": ("miou", "mbiou", "pixel_acc", "loc_acc", "removal"),
-    "removal": ("removal",),
-    "ordering": ("ordering",),
-    "timings": ("fps", "render_ms"),
-}
-
-
-QUERY_MODES = ("encode", "decode")
-GROUP_SKIP_KEYS = ("removal",)  # a skipped key that stands for all metrics named <key>_*
-
-
-def _skip_key_matches(key: str, metric: str) -> bool:
-    """Does a `skipped` key explain a missing metric? e.g. "lpips" -> lpips, "3dovs_encode" ->
-    miou_3dovs_encode and miou_3dovs (the configured mode), "semantics" -> every semantic metric."""
-    if not metric:
-        return False
-    if metric.startswith(key) or key.startswith(metric):
-        return True
-    mtok = set(metric.split("_"))
-    has_mode = bool(mtok & set(QUERY_MODES))
-    for t in key.split("_"):
-        if t in mtok:
-            continue
-        if t in QUERY_MODES and not has_mode:
-            continue
-        if t in SKIP_FAMILIES and any(metric.startswith(f) for f in SKIP_FAMILIES[t]):
-            continue
-        return False
-    return True
-
-
 def missing_reason(metric: str, skipped: dict, status: str) -> str:
-    """Why `metric` has no value: the matching entries of results' `skipped` (the metric itself,
-    a prefix of it such as `miou_lerf` for `miou_lerf_encode`, a token such as `lpips` / `lerf` /
-    `3dovs`, or a family such as `semantics`), else the run status, else "no reason recorded"."""
-    reasons = []
+    """Why `metric` has no value: results' `skipped` entry under that metric name, else the run
+    status, else "no reason recorded"."""
     if metric in skipped:
-        reasons.append(str(skipped[metric]))
-    else:
-        for key, why in skipped.items():
-            if _skip_key_matches(str(key), metric):
-                reasons.append(str(why))
-    if not reasons and status != "done":
-        reasons.append(f"run {status}")
-    if not reasons:
-        reasons.append("no reason recorded")
-    seen: list[str] = []
-    for r in reasons:
-        if r not in seen:
-            seen.append(r)
-    return "; ".join(seen)
+        return str(skipped[metric])
+    if status != "done":
+        return f"run {status}"
+    return "no reason recorded"
+
+
+def dropped_text(dropped: Any) -> str:
+    """The resolver's {key: reason} as one cell: "key: reason; ..." sorted by key, "" when none."""
+    if not dropped:
+        return ""
+    if not isinstance(dropped, dict):
+        return str(dropped)
+    return "; ".join(f"{k}: {v}" for k, v in sorted(dropped.items()))
+
+
+_MISSING = object()
+
+
+def _config_value(config: Any, dotted: str) -> Any:
+    """The value at a dotted key of the resolved config, or _MISSING."""
+    node = config
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return _MISSING
+        node = node[part]
+    return node
 
 
 ENV_KEYS = ("git_sha", "gsbench", "platform")
@@ -200,13 +177,16 @@ def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
         "provider.depth": providers.get("depth"),
         "provider.masks": providers.get("masks"),
         "provider.features": providers.get("features"),
+        "dropped": dropped_text(res.get("dropped")),
         "config_key": config_key(res.get("config")),
     }
     for k, v in providers.items():
         if f"provider.{k}" not in base:
             base[f"provider.{k}"] = _scalar(v)
     for k, v in grid.items():
-        base[f"axis.{k}"] = _scalar(v)
+        resolved = _config_value(res.get("config"), k)
+        base[f"axis.{k}"] = _scalar(v if resolved is _MISSING else resolved)
+        base[f"requested.{k}"] = _scalar(v)
     for k, v in machine.items():
         base[f"machine.{k}"] = _scalar(v)
     env = _read_env(path.parent / "env.json")
@@ -228,11 +208,8 @@ def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
                 entries.append((m, v, section))
                 present.add(m)
     # A metric the evaluation skipped without writing a null still gets a row with its reason.
-    # (also every metric of a group skipped as a whole, e.g. "removal" -> removal_residual, ...)
     for m in sorted(known_metrics):
-        if m in present:
-            continue
-        if m in skipped or any(m.startswith(f"{k}_") for k in skipped if k in GROUP_SKIP_KEYS):
+        if m not in present and m in skipped:
             entries.append((m, None, "metrics"))
             present.add(m)
 
@@ -271,8 +248,6 @@ def collect(runs_dir: str | Path) -> pd.DataFrame:
     Runs found twice (same run_id in two folders, e.g. a copied run) are kept once, the first in
     path order; the duplicates are listed in `df.attrs["warnings"]`.
     """
-    from gsbench.reports.spec import KNOWN_METRICS
-
     runs_dir = Path(runs_dir)
     paths = find_results(runs_dir)
     if not paths:
@@ -301,7 +276,7 @@ def collect(runs_dir: str | Path) -> pd.DataFrame:
     df["value"] = df["value"].astype("float64")
     df["seed"] = df["seed"].astype("Int64")
     for c in df.columns:
-        if c.startswith(("machine.", "provider.", "env.")):
+        if c.startswith(("machine.", "provider.", "env.", "requested.")):
             df[c] = df[c].map(lambda v: None if v is None or (isinstance(v, float) and math.isnan(v)) else str(v)).astype(object)
         elif c not in ("value", "seed") and not c.startswith("axis."):
             df[c] = _objects(df[c])

@@ -10,29 +10,7 @@ Run folder (one per trained run, NerfBaselines-like, one JSON of results per run
   status.json       {"state": "running"|"done"|"failed"|"nonfinite", "message": str, "step": int, ...}
   train_log.jsonl   one JSON object per line: {"step", "wall_s", "loss": {...}, "eval": {...}?}
   checkpoint.pt     GaussianField state + optimiser state + step (atomic)
-  results.json      see RESULTS_SCHEMA below
-
-results.json keys (reports read only these):
-  run_id, method, scene (name), scene_path, seed,
-  study (grid name, e.g. "depth_formulation", or None), grid (dict of axis key -> value, may be empty),
-  config (resolved config), providers {"depth": id|None, "masks": id|None, "features": id|None},
-  backend (render backend id), protocol ("3dovs"|"lerf"|None),
-  metric_impl {metric name: implementation id},
-  metrics {name: float|None}          means over test views (None = could not be computed),
-  per_view {name: [float|None, ...]}, view_names [str, ...],
-  skipped {what: reason},             everything not computed and why
-  timings {"train_s", "eval_s", "fps", ...}, memory {"peak_rss_mb", ...},
-  machine {"host", "cpu", "cores", "torch", ...}
-  status ("done" | "failed" | "nonfinite"), dropped {part: reason} (what the config resolver left out)
-
-Metric names (keys of `metrics` / `per_view`; reports look for exactly these):
-  psnr, ssim, lpips, fps
-  miou_3dovs, mbiou_3dovs, pixel_acc_3dovs            (the configured query mode)
-  miou_3dovs_encode, miou_3dovs_decode, mbiou_3dovs_encode, mbiou_3dovs_decode
-  miou_lerf, loc_acc_lerf, miou_lerf_encode, miou_lerf_decode
-  removal_residual, removal_psnr_outside              (synthetic scenes with removal GT)
-  ordering_adjacent_distance, ordering_adjacent_mask_iou
-Timings: train_s, eval_s, render_ms; memory: peak_rss_mb.
+  results.json      the schema, the metric names and the builders are in gsbench/results.py
 
 Study names and the grid axis keys they vary (grids in gsbench/grids/, tables in reports):
   reconstruction     method (x scenes)
@@ -55,8 +33,7 @@ from typing import Any
 import numpy as np
 
 from gsbench.errors import InputError
-
-RESULTS_VERSION = 1
+from gsbench.results import RESULTS_VERSION  # noqa: E402,F401  (grids reads it here until it uses gsbench.results)
 
 
 def _json_default(o: Any):

@@ -183,10 +183,12 @@ def training_size(camera: Camera, max_width: Optional[int]) -> tuple[int, int]:
 
 def load_views(scene, config: dict, progress: bool = False) -> tuple[TrainViews, tuple[int, int]]:
     """Train cameras/images at the training resolution, plus the first `eval_views` test views."""
+    from gsbench.datasets.splits import split_ids
     tcfg = config["train"]
-    if not scene.train_ids:
+    train_ids, test_ids = split_ids(scene, config)
+    if not train_ids:
         raise InputError(f"{scene.path}: the scene has no training views")
-    W, H = training_size(scene.cameras[scene.train_ids[0]], tcfg.get("max_width"))
+    W, H = training_size(scene.cameras[train_ids[0]], tcfg.get("max_width"))
 
     def load(i: int) -> tuple[Camera, torch.Tensor]:
         img = np.asarray(scene.image(i), dtype=np.float32)
@@ -198,10 +200,10 @@ def load_views(scene, config: dict, progress: bool = False) -> tuple[TrainViews,
         return scene.cameras[i].resized(W, H), torch.from_numpy(np.clip(img, 0.0, 1.0).copy())
 
     views = TrainViews({}, {})
-    for i in scene.train_ids:
+    for i in train_ids:
         views.cameras[i], views.images[i] = load(i)
     n_eval = int(tcfg.get("eval_views") or 0)
-    test = list(scene.test_ids)
+    test = list(test_ids)
     if n_eval > 0 and test:
         pick = [test[int(j)] for j in np.unique(np.linspace(0, len(test) - 1, min(n_eval, len(test))).round().astype(int))]
         for i in pick:

@@ -57,7 +57,7 @@ def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Ca
         return None
     import copy
 
-    from gsbench.evaluate import segmentation_metrics
+    from gsbench.evaluation import segmentation_metrics
     ids = sorted(views.eval_cameras)
     cams = [views.eval_cameras[i] for i in ids]
 

@@ -1,8 +1,8 @@
 """gsbench.metrics: pure evaluation functions on numpy arrays / torch tensors.
 
 Every number a result records names the implementation that produced it: the ids are in
-`METRIC_IMPL` (metric name of store.py -> id) and in each function's result. Protocols follow
-shared/EVAL_PROTOCOLS.md; the module docstrings state every rule (borders, empty masks, ties).
+`METRIC_IMPL` (metric name of gsbench.results -> id) and in each function's result. The protocols
+are described in docs/protocols.md; the module docstrings state every rule (borders, empty masks, ties).
 Bad input raises gsbench.errors.InputError. Images are (H, W) or (H, W, C) in [0, 1].
 
 Image metrics (image.py, perceptual.py)
@@ -37,7 +37,7 @@ LERF-OVS, the LangSplat protocol (lerf.py)
 
 3D-OVS (ovs3d.py)
   ovs3d_predict(pixel_features (H,W,D), class_embeddings (C,D)) -> int32 (H, W) argmax of cosine
-  resize_nearest(mask, width, height) -> bool (height, width)
+  resize_nearest(mask, width, height) -> same dtype (height, width), centre sampling (PIL NEAREST)
   ovs3d_view_metrics(pred_labels, gt_masks {class: mask}, class_names, *, dilation_ratio=0.02) -> dict
   evaluate_ovs3d_scene(views: [Ovs3dView(name, pred_labels, gt_masks)], class_names, *,
                        missing="error"|"skip"|"zero", dilation_ratio=0.02)
@@ -60,13 +60,15 @@ from .lerf import (CANONICAL_NEGATIVES, LERF_IMPL, LerfPair, LerfSceneResult, bo
                    lerf_blend, lerf_localization, lerf_mask, lerf_relevancy, majority_smooth, select_level)
 from .ordering import (ORDERING_DISTANCE_IMPL, ORDERING_MASK_IOU_IMPL, adjacent_mask_iou,
                        adjacent_mask_iou_pairs, mean_adjacent_distance)
-from .ovs3d import (OVS3D_IMPL, Ovs3dSceneResult, Ovs3dView, evaluate_ovs3d_scene, ovs3d_predict,
-                    ovs3d_view_metrics, resize_nearest)
-from .perceptual import LPIPSNet, LPIPSResult, build_lpips_network, find_lpips_weights, load_lpips, lpips, lpips_impl
+from ._common import NEAREST_IMPL, resize_nearest
+from .ovs3d import (OVS3D_IMPL, PIXEL_ACC_IMPL, PIXEL_ACC_RULES, Ovs3dSceneResult, Ovs3dView, evaluate_ovs3d_scene,
+                    ovs3d_predict, ovs3d_view_metrics, pixel_accuracy)
+from .perceptual import (LPIPS_RANGES, LPIPSNet, LPIPSResult, build_lpips_network, find_lpips_weights, load_lpips,
+                         lpips, lpips_impl)
 from .segmentation import BIOU_IMPL, IOU_IMPL, boundary_band, boundary_iou, boundary_width, iou, mbiou, miou
 from .timing import FPS_IMPL, time_fps
 
-#: metric name (store.py METRIC NAMES) -> implementation id of the default settings.
+#: metric name (gsbench.results.METRIC_NAMES) -> implementation id of the default settings.
 #: A caller that changes a setting (quantize=False, border="zeropad", net="alex", ...) records
 #: the id of that setting: PSNR_IMPL[quantize], SSIM_IMPL[border], lpips_impl(net).
 METRIC_IMPL: dict[str, str] = {
@@ -82,7 +84,8 @@ METRIC_IMPL: dict[str, str] = {
     "miou_lerf_decode": LERF_IMPL,
     "miou_3dovs": OVS3D_IMPL,
     "mbiou_3dovs": OVS3D_IMPL + "+" + BIOU_IMPL,
-    "pixel_acc_3dovs": OVS3D_IMPL,
+    "pixel_acc_3dovs": OVS3D_IMPL + "+" + PIXEL_ACC_IMPL["reference"],
+    "pixel_acc_labelled_3dovs": OVS3D_IMPL + "+" + PIXEL_ACC_IMPL["labelled"],
     "miou_3dovs_encode": OVS3D_IMPL,
     "miou_3dovs_decode": OVS3D_IMPL,
     "mbiou_3dovs_encode": OVS3D_IMPL + "+" + BIOU_IMPL,
@@ -99,5 +102,6 @@ __all__ = [
     "CANONICAL_NEGATIVES", "ovs3d_predict", "resize_nearest", "ovs3d_view_metrics", "evaluate_ovs3d_scene",
     "Ovs3dView", "Ovs3dSceneResult", "mean_adjacent_distance", "adjacent_mask_iou", "adjacent_mask_iou_pairs",
     "time_fps", "PSNR_IMPL", "SSIM_IMPL", "LERF_IMPL", "OVS3D_IMPL", "BIOU_IMPL", "IOU_IMPL", "FPS_IMPL",
-    "ORDERING_DISTANCE_IMPL", "ORDERING_MASK_IOU_IMPL",
+    "ORDERING_DISTANCE_IMPL", "ORDERING_MASK_IOU_IMPL", "NEAREST_IMPL", "PIXEL_ACC_IMPL", "PIXEL_ACC_RULES",
+    "pixel_accuracy", "LPIPS_RANGES",
 ]

@@ -1,4 +1,4 @@
-"""Image-quality metrics: PSNR and SSIM on [0, 1] images (EVAL_PROTOCOLS.md, "Image metrics").
+"""Image-quality metrics: PSNR and SSIM on [0, 1] images (docs/metrics.md).
 
 Images are (H, W) or (H, W, C) arrays or tensors with values in [0, 1]; NaN/inf is an
 InputError. Both images are clipped to [0, 1] first (renders can overshoot slightly; the 3DGS

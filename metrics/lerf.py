@@ -1,4 +1,4 @@
-"""LERF-OVS evaluation, the LangSplat protocol (EVAL_PROTOCOLS.md, "LERF-OVS").
+"""LERF-OVS evaluation, the LangSplat protocol (docs/protocols.md).
 
 Per frame and text query, for each feature level l (LangSplat renders 3 SAM levels; a method
 with one level passes one map):
@@ -41,6 +41,35 @@ LERF_THRESHOLD = 0.7
 LERF_SMOOTH_RADIUS = 3
 MISSING_POLICIES = ("error", "skip", "zero")
 LERF_IMPL = "lerf-ovs/langsplat/v1"
+LERF_REFERENCE_WIDTH = 985    # width of the LERF-OVS label images the 30 px / 7 px kernels were made for
+LERF_KERNEL_MODES = ("reference", "auto")
+
+
+@dataclass(frozen=True)
+class LerfKernels:
+    """Pixel sizes of the blend box and the majority window, and the id suffix that records them."""
+
+    blend: int = LERF_BLEND_KERNEL
+    radius: int = LERF_SMOOTH_RADIUS
+
+    @property
+    def tag(self) -> str:
+        ref = self.blend == LERF_BLEND_KERNEL and self.radius == LERF_SMOOTH_RADIUS
+        return "" if ref else f"/kernels-scaled-box{self.blend}-maj{2 * self.radius + 1}"
+
+
+def lerf_kernels(label_width: int, mode: str = "auto") -> LerfKernels:
+    """Kernel sizes for labels `label_width` px wide. "reference": 30 px and 7 px whatever the size.
+    "auto": the same fraction of the image as on the reference labels (scale label_width / 985),
+    never larger than the reference sizes: on real LERF-OVS labels it is the reference."""
+    if mode not in LERF_KERNEL_MODES:
+        raise InputError(f"LERF kernel mode must be one of {LERF_KERNEL_MODES}, got {mode!r}")
+    if label_width < 1:
+        raise InputError(f"label width must be positive, got {label_width}")
+    if mode == "reference":
+        return LerfKernels()
+    s = min(1.0, label_width / float(LERF_REFERENCE_WIDTH))
+    return LerfKernels(max(1, int(round(LERF_BLEND_KERNEL * s))), max(1, int(round(LERF_SMOOTH_RADIUS * s))))
 
 
 def _sigmoid(z: np.ndarray) -> np.ndarray:
@@ -82,10 +111,10 @@ def box_mean(r: Any, size: int = LERF_BLEND_KERNEL) -> np.ndarray:
     return cv2.filter2D(a, cv2.CV_64F, k)
 
 
-def lerf_blend(r: Any) -> np.ndarray:
+def lerf_blend(r: Any, size: int = LERF_BLEND_KERNEL) -> np.ndarray:
     """r' = 0.5 (r + mean30x30(r))."""
     a = finite_float(r, "relevancy")
-    return 0.5 * (a + box_mean(a))
+    return 0.5 * (a + box_mean(a, size))
 
 
 def majority_smooth(mask: Any, *, radius: int = LERF_SMOOTH_RADIUS, window: str = "langsplat") -> np.ndarray:
@@ -110,14 +139,15 @@ def majority_smooth(mask: Any, *, radius: int = LERF_SMOOTH_RADIUS, window: str 
     return np.where(count > 0, out, m)
 
 
-def lerf_mask(r_blend: Any, *, threshold: float = LERF_THRESHOLD, window: str = "langsplat") -> np.ndarray:
+def lerf_mask(r_blend: Any, *, threshold: float = LERF_THRESHOLD, window: str = "langsplat",
+              radius: int = LERF_SMOOTH_RADIUS) -> np.ndarray:
     """Predicted mask from a blended relevancy map r': min-max normalise, threshold, 7x7 majority."""
     a = finite_float(r_blend, "blended relevancy")
     if a.ndim != 2:
         raise InputError(f"blended relevancy: expected (H, W), got shape {a.shape}")
     lo, hi = float(a.min()), float(a.max())
     x = (a - lo) / (hi - lo + 1e-9)
-    return majority_smooth(x > threshold, window=window)
+    return majority_smooth(x > threshold, window=window, radius=radius)
 
 
 def _levels(relevancy: Any, what: str) -> list[np.ndarray]:
@@ -136,13 +166,13 @@ def select_level(blended: Sequence[np.ndarray]) -> int:
     return int(np.argmax([float(np.max(b)) for b in blended]))
 
 
-def lerf_localization(relevancy_levels: Any, bboxes: Any) -> bool:
+def lerf_localization(relevancy_levels: Any, bboxes: Any, size: int = LERF_BLEND_KERNEL) -> bool:
     """True when an argmax pixel of mean30x30(r) (best level) lies in any box [x1, y1, x2, y2]."""
     maps = _levels(relevancy_levels, "relevancy")
     boxes = finite_float(bboxes, "gt bboxes").reshape(-1, 4)
     if boxes.shape[0] == 0:
         raise InputError("gt bboxes: no box given for localization")
-    avg = [box_mean(m) for m in maps]
+    avg = [box_mean(m, size) for m in maps]
     lvl = select_level(avg)
     ys, xs = np.nonzero(avg[lvl] == avg[lvl].max())
     for x1, y1, x2, y2 in boxes:
@@ -181,7 +211,8 @@ class LerfSceneResult:
 
 
 def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_THRESHOLD,
-                        missing: str = "error", window: str = "langsplat") -> LerfSceneResult:
+                        missing: str = "error", window: str = "langsplat",
+                        kernels: LerfKernels = LerfKernels()) -> LerfSceneResult:
     """The whole per-scene LERF-OVS protocol.
 
     missing: what a pair without a prediction does. "error" (default) raises InputError naming
@@ -217,7 +248,7 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
             per_pair.append(entry)
             continue
         maps = _levels(p.relevancy, f"{tag} relevancy")
-        blended = [lerf_blend(m) for m in maps]
+        blended = [lerf_blend(m, kernels.blend) for m in maps]
         lvl = select_level(blended)
         entry = {"frame": p.frame, "query": p.query, "iou": None, "level": lvl, "localized": None}
         gt = None if p.gt_mask is None else as_mask(p.gt_mask, f"{tag} gt_mask")
@@ -228,15 +259,16 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
             skipped.append({"frame": p.frame, "query": p.query,
                             "reason": "no GT mask" if gt is None else "empty GT mask (IoU undefined)"})
         else:
-            pred = lerf_mask(blended[lvl], threshold=threshold, window=window)
+            pred = lerf_mask(blended[lvl], threshold=threshold, window=window, radius=kernels.radius)
             entry["iou"] = iou(pred, gt)
             ious.append(entry["iou"])
         if has_boxes:
-            entry["localized"] = lerf_localization(maps, p.gt_bboxes)
+            entry["localized"] = lerf_localization(maps, p.gt_bboxes, kernels.blend)
             hits.append(1.0 if entry["localized"] else 0.0)
         per_pair.append(entry)
     return LerfSceneResult(
         miou=mean_or_none(ious), loc_acc=mean_or_none(hits), per_pair=per_pair, skipped=skipped,
-        n_pairs=len(pairs), n_iou=len(ious), n_loc=len(hits), missing=missing,
-        params={"threshold": threshold, "window": window, "blend_kernel": LERF_BLEND_KERNEL,
+        n_pairs=len(pairs), n_iou=len(ious), n_loc=len(hits), missing=missing, impl=LERF_IMPL + kernels.tag,
+        params={"threshold": threshold, "window": window, "blend_kernel": kernels.blend,
+                "majority_window": 2 * kernels.radius + 1,
                 "temperature": LERF_TEMPERATURE, "negatives": list(CANONICAL_NEGATIVES)})

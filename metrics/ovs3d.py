@@ -1,28 +1,27 @@
-"""3D-OVS evaluation (EVAL_PROTOCOLS.md, "3D-OVS").
+"""3D-OVS evaluation (docs/protocols.md).
 
 Prediction: per pixel, argmax over the scene's classes of cos(feature, text_c); no background
 class, no threshold (`ovs3d_predict`). GT: one binary mask per class (foreground where the PNG
-is 255), resized NEAREST (cv2.INTER_NEAREST) to the evaluation resolution.
+is 255), resized to the evaluation resolution by centre sampling (`resize_nearest`, as PIL NEAREST).
 
 Per (view, class): IoU = |P_c & G_c| / |P_c | G_c| with 0 when the union is empty (the
 reference's rule), and Boundary IoU with the same empty rule. A class without a GT mask in a
 view counts as an empty GT mask (every scene class is scored in every view).
 mIoU / mBIoU = plain mean over views x classes.
-Pixel accuracy of a view = pixels whose predicted class has GT there / pixels covered by any GT
-mask (pixels outside every GT mask are not scored: the protocol has no background class);
-the scene value is the mean over views (views without any GT pixel are listed in `skipped`).
+Pixel accuracy, two named rules (`pixel_accuracy`): "reference" (pixel_acc_3dovs), exact
+one-hot match over all H x W pixels as the reference scores it; "labelled"
+(pixel_acc_labelled_3dovs), gsbench's variant over GT-covered pixels. Scene value = mean over views.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
-import cv2
 import numpy as np
 
 from gsbench.errors import InputError
 
-from ._common import as_mask, finite_float, mean_or_none, pixel_text_cosines, to_numpy
+from ._common import as_mask, finite_float, mean_or_none, pixel_text_cosines, resize_nearest, to_numpy
 from .segmentation import BOUNDARY_DILATION_RATIO, boundary_iou, iou
 
 OVS3D_IMPL = "3dovs/argmax-cos/v1"
@@ -38,12 +37,40 @@ def ovs3d_predict(pixel_features: Any, class_embeddings: Any) -> np.ndarray:
     return np.argmax(cos, axis=1).astype(np.int32).reshape(h, w)
 
 
-def resize_nearest(mask: Any, width: int, height: int) -> np.ndarray:
-    """A GT mask at the evaluation resolution (cv2.INTER_NEAREST)."""
-    m = as_mask(mask, "gt mask")
-    if m.shape == (height, width):
-        return m
-    return cv2.resize(m.astype(np.uint8), (int(width), int(height)), interpolation=cv2.INTER_NEAREST) > 0
+PIXEL_ACC_RULES = ("reference", "labelled")
+PIXEL_ACC_IMPL = {"reference": "pixel-acc/exact-match-all-pixels/3dovs-ref/v1",
+                  "labelled": "pixel-acc/labelled-pixels-any-gt-class/gsbench/v1"}
+
+
+def pixel_accuracy(pred_labels: np.ndarray, gt_stack: np.ndarray, rule: str) -> float | None:
+    """Pixel accuracy of one view under a named rule (the one function both code paths use).
+
+    pred_labels: (H, W) int, a class index or -1 for "no class"; gt_stack: (C, H, W) bool, one GT
+    mask per class (masks may overlap or leave pixels unlabelled).
+      "reference": the 3D-OVS reference (accuracy of one-hot rows): a pixel is right only when
+                   its GT row equals the prediction's one-hot row, over all H x W pixels; an
+                   unlabelled or doubly-labelled pixel is right only for the "no class" prediction
+                   that matches it exactly.
+      "labelled":  gsbench's variant: over pixels some GT mask covers, right when the predicted
+                   class has GT there (overlaps count for either class); None without such pixels.
+    """
+    if rule not in PIXEL_ACC_RULES:
+        raise InputError(f"pixel accuracy rule must be one of {PIXEL_ACC_RULES}, got {rule!r}")
+    pred = np.asarray(pred_labels)
+    gt = np.asarray(gt_stack, dtype=bool)
+    if gt.ndim != 3 or gt.shape[1:] != pred.shape:
+        raise InputError(f"pixel accuracy: GT stack {gt.shape} does not match predictions {pred.shape}")
+    c = gt.shape[0]
+    has = (pred >= 0) & (pred < c)
+    idx = np.where(has, pred, 0)
+    hit = has & np.take_along_axis(gt, idx[None].astype(np.intp), axis=0)[0]
+    count = gt.sum(axis=0)
+    if rule == "reference":
+        right = (hit & (count == 1)) | (~has & (count == 0))
+        return float(np.count_nonzero(right)) / float(pred.size) if pred.size else None
+    covered = count > 0
+    n = int(np.count_nonzero(covered))
+    return float(np.count_nonzero(hit & covered)) / n if n else None
 
 
 def ovs3d_view_metrics(pred_labels: Any, gt_masks: Mapping[str, Any], class_names: Sequence[str], *,
@@ -67,18 +94,16 @@ def ovs3d_view_metrics(pred_labels: Any, gt_masks: Mapping[str, Any], class_name
         raise InputError(f"gt_masks: classes not in class_names: {sorted(unknown)}")
     h, w = pred.shape
     ious, bious = {}, {}
-    correct = np.zeros((h, w), dtype=bool)
-    covered = np.zeros((h, w), dtype=bool)
+    stack = np.zeros((n, h, w), dtype=bool)
     for c, name in enumerate(class_names):
-        g = resize_nearest(gt_masks[name], w, h) if name in gt_masks else np.zeros((h, w), bool)
+        if name in gt_masks:
+            stack[c] = resize_nearest(as_mask(gt_masks[name], f"gt mask {name!r}"), w, h)
         p = pred == c
-        ious[name] = iou(p, g, empty=0.0)
-        bious[name] = boundary_iou(p, g, dilation_ratio=dilation_ratio, empty=0.0)
-        correct |= p & g
-        covered |= g
-    n_cov = int(covered.sum())
-    acc = int(correct.sum()) / n_cov if n_cov else None
-    return {"iou": ious, "biou": bious, "pixel_acc": acc, "gt_pixels": n_cov}
+        ious[name] = iou(p, stack[c], empty=0.0)
+        bious[name] = boundary_iou(p, stack[c], dilation_ratio=dilation_ratio, empty=0.0)
+    return {"iou": ious, "biou": bious, "pixel_acc": pixel_accuracy(pred, stack, "reference"),
+            "pixel_acc_labelled": pixel_accuracy(pred, stack, "labelled"),
+            "gt_pixels": int(np.count_nonzero(stack.any(axis=0)))}
 
 
 @dataclass
@@ -94,7 +119,8 @@ class Ovs3dView:
 class Ovs3dSceneResult:
     miou: float | None
     mbiou: float | None
-    pixel_acc: float | None
+    pixel_acc: float | None    # rule "reference"
+    pixel_acc_labelled: float | None
     per_view: list[dict]       # {view, miou, mbiou, pixel_acc, iou: {class: v}, biou: {class: v}}
     skipped: list[dict]        # {view, reason}
     n_views: int
@@ -115,6 +141,7 @@ def evaluate_ovs3d_scene(views: Sequence[Ovs3dView], class_names: Sequence[str],
     all_iou: list[float] = []
     all_biou: list[float] = []
     accs: list[float] = []
+    accs_lab: list[float] = []
     per_view: list[dict] = []
     skipped: list[dict] = []
     for v in views:
@@ -126,21 +153,24 @@ def evaluate_ovs3d_scene(views: Sequence[Ovs3dView], class_names: Sequence[str],
                 continue
             skipped.append({"view": v.name, "reason": "missing prediction, scored 0"})
             zeros = {c: 0.0 for c in class_names}
-            m = {"iou": zeros, "biou": dict(zeros), "pixel_acc": 0.0}
+            m = {"iou": zeros, "biou": dict(zeros), "pixel_acc": 0.0, "pixel_acc_labelled": 0.0}
         else:
             m = ovs3d_view_metrics(v.pred_labels, v.gt_masks, class_names, dilation_ratio=dilation_ratio)
         vi = [m["iou"][c] for c in class_names]
         vb = [m["biou"][c] for c in class_names]
         all_iou.extend(vi)
         all_biou.extend(vb)
-        if m["pixel_acc"] is None:
-            skipped.append({"view": v.name, "reason": "no GT pixel in any class: pixel accuracy undefined"})
+        accs.append(m["pixel_acc"])
+        if m["pixel_acc_labelled"] is None:
+            skipped.append({"view": v.name, "reason": "no GT pixel in any class: labelled pixel accuracy undefined"})
         else:
-            accs.append(m["pixel_acc"])
+            accs_lab.append(m["pixel_acc_labelled"])
         per_view.append({"view": v.name, "miou": mean_or_none(vi), "mbiou": mean_or_none(vb),
-                         "pixel_acc": m["pixel_acc"], "iou": m["iou"], "biou": m["biou"]})
+                         "pixel_acc": m["pixel_acc"], "pixel_acc_labelled": m["pixel_acc_labelled"],
+                         "iou": m["iou"], "biou": m["biou"]})
     return Ovs3dSceneResult(miou=mean_or_none(all_iou), mbiou=mean_or_none(all_biou),
-                            pixel_acc=mean_or_none(accs), per_view=per_view, skipped=skipped,
+                            pixel_acc=mean_or_none(accs), pixel_acc_labelled=mean_or_none(accs_lab),
+                            per_view=per_view, skipped=skipped,
                             n_views=len(views), missing=missing,
                             params={"dilation_ratio": dilation_ratio, "empty_union": 0.0,
-                                    "gt_resize": "nearest"})
+                                    "gt_resize": "nearest-centre"})

@@ -48,10 +48,17 @@ LPIPS_SHIFT = (-0.030, -0.088, -0.188)
 LPIPS_SCALE = (0.458, 0.448, 0.450)
 LPIPS_MIN_SIZE = 32
 WEIGHTS_ENV = "GSBENCH_WEIGHTS"
+#: input range fed to the network: the LPIPS package maps [0, 1] images to [-1, 1] (2x - 1);
+#: the 3DGS metrics script feeds the [0, 1] images unscaled, which reads lower.
+LPIPS_RANGES = ("lpips-[-1,1]", "3dgs-[0,1]")
+LPIPS_DEFAULT_RANGE = "lpips-[-1,1]"
 
 
-def lpips_impl(net: str, random_init: bool = False) -> str:
-    base = f"lpips/{net}/v0.1/gsbench-torch/v1"
+def lpips_impl(net: str, random_init: bool = False, input_range: str = LPIPS_DEFAULT_RANGE) -> str:
+    """Implementation id; it names the input range (the two public conventions give different values)."""
+    if input_range not in LPIPS_RANGES:
+        raise InputError(f"LPIPS input range must be one of {LPIPS_RANGES}, got {input_range!r}")
+    base = f"lpips/{net}/v0.1/input{input_range}/gsbench-torch/v2"
     return base + "/random-init-TEST-ONLY" if random_init else base
 
 
@@ -236,31 +243,35 @@ class LPIPSResult:
     net: str
 
 
-def _to_batch(img: Any, name: str) -> torch.Tensor:
+def _to_batch(img: Any, name: str, input_range: str) -> torch.Tensor:
     a = finite_float(img, name, np.float32)
     if a.ndim != 3 or a.shape[2] != 3:
         raise InputError(f"{name}: LPIPS needs an (H, W, 3) RGB image, got shape {a.shape}")
     if min(a.shape[:2]) < LPIPS_MIN_SIZE:
         raise InputError(f"{name}: LPIPS needs images of at least {LPIPS_MIN_SIZE} px per side, got {a.shape[:2]}")
     t = torch.from_numpy(np.clip(a, 0.0, 1.0)).permute(2, 0, 1)[None]
-    return t * 2.0 - 1.0
+    return t * 2.0 - 1.0 if input_range == "lpips-[-1,1]" else t
 
 
 def lpips(pred: Any, gt: Any, *, net: str = "vgg", model: LPIPSNet | None = None,
-          weights_dir: str | os.PathLike | None = None, device: str | torch.device = "cpu") -> LPIPSResult:
-    """LPIPS distance of two (H, W, 3) images in [0, 1] (mapped to [-1, 1]); lower is better.
+          weights_dir: str | os.PathLike | None = None, device: str | torch.device = "cpu",
+          input_range: str = LPIPS_DEFAULT_RANGE) -> LPIPSResult:
+    """LPIPS distance of two (H, W, 3) images in [0, 1]; lower is better. `input_range` says what the
+    network sees: "lpips-[-1,1]" (2x - 1, the LPIPS package) or "3dgs-[0,1]" (unscaled, 3DGS's script).
 
     `model` overrides the weight lookup (e.g. a network from `build_lpips_network`).
     """
+    if input_range not in LPIPS_RANGES:
+        raise InputError(f"LPIPS input range must be one of {LPIPS_RANGES}, got {input_range!r}")
     if model is None:
         model, reason = load_lpips(net, weights_dir)
         if model is None:
-            return LPIPSResult(None, reason, lpips_impl(net), net)
-    x0 = _to_batch(pred, "pred image")
-    x1 = _to_batch(gt, "gt image")
+            return LPIPSResult(None, reason, lpips_impl(net, input_range=input_range), net)
+    x0 = _to_batch(pred, "pred image", input_range)
+    x1 = _to_batch(gt, "gt image", input_range)
     if x0.shape != x1.shape:
         raise InputError(f"pred image has shape {tuple(x0.shape[2:])} but gt image has {tuple(x1.shape[2:])}")
     model = model.to(device)
     with torch.no_grad():
         v = float(model(x0.to(device), x1.to(device))[0])
-    return LPIPSResult(v, None, lpips_impl(model.net, model.random_init), model.net)
+    return LPIPSResult(v, None, lpips_impl(model.net, model.random_init, input_range), model.net)

@@ -1,4 +1,4 @@
-"""Mask metrics: IoU, the Boundary IoU band, Boundary IoU (EVAL_PROTOCOLS.md, "Boundary IoU").
+"""Mask metrics: IoU, the Boundary IoU band, Boundary IoU (docs/metrics.md).
 
 Masks are 2-D arrays or tensors; non-bool input counts non-zero as foreground.
 

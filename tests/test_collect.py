@@ -137,17 +137,40 @@ def test_empty_dir_duplicates_and_hidden(tmp_path: Path):
     assert len(df.attrs["warnings"]) == 1 and "duplicate" in df.attrs["warnings"][0]
 
 
-def test_missing_reason_matching():
-    sk = {"lpips": "no LPIPS weights", "3dovs_encode": "no semantic field (encode)",
-          "3dovs_decode": "no semantic field (decode)", "removal": "no removal GT",
-          "lerf_unlabeled_views": "2 views unlabeled"}
+def test_missing_reason_is_looked_up_by_metric_name_only():
+    """skipped is keyed by metric name: no token or prefix matching of free-text keys."""
+    sk = {"lpips": "no LPIPS weights", "miou_3dovs_decode": "no semantic field (decode)",
+          "3dovs_encode": "a free-text key", "semantics": "vanilla"}
     assert missing_reason("lpips", sk, "done") == "no LPIPS weights"
     assert missing_reason("miou_3dovs_decode", sk, "done") == "no semantic field (decode)"
-    assert missing_reason("miou_3dovs", sk, "done") == "no semantic field (encode); no semantic field (decode)"
-    assert missing_reason("removal_psnr_outside", sk, "done") == "no removal GT"
+    assert missing_reason("miou_3dovs_encode", sk, "done") == "no reason recorded"
     assert missing_reason("miou_lerf", sk, "done") == "no reason recorded"
-    assert missing_reason("miou_lerf", {"semantics": "vanilla"}, "done") == "vanilla"
     assert missing_reason("psnr", {}, "failed") == "run failed"
+
+
+def test_dropped_column_and_axis_from_resolved_config(tmp_path: Path):
+    """Two loss-subset cells on a scene without depth: the grid asked for depth on and off, the
+    resolver switched it off in both, so axis.<key> (resolved) agrees and `dropped` says why."""
+    root = tmp_path / "runs"
+    why = "no depth prior: scene has no depth"
+    for name, asked in (("on", True), ("off", False)):
+        write_run(root, f"ls/{name}", method="gaussiands", scene="s", study="loss_subsets",
+                  grid={"gaussiands.losses.depth": asked}, metrics={"psnr": 20.0},
+                  config_extra={"gaussiands": {"losses": {"depth": False}}})
+        res_path = root / "ls" / name / "results.json"
+        res = json.loads(res_path.read_text())
+        res["dropped"] = {"gaussiands.losses.depth": why, "priors.depth": why} if asked else {"priors.depth": why}
+        res_path.write_text(json.dumps(res))
+    df = collect(root)
+    on = df[(df["run_id"] == "id-ls/on") & (df["metric"] == "psnr")].iloc[0]
+    off = df[(df["run_id"] == "id-ls/off") & (df["metric"] == "psnr")].iloc[0]
+    assert on["axis.gaussiands.losses.depth"] == off["axis.gaussiands.losses.depth"]
+    assert not on["axis.gaussiands.losses.depth"]
+    assert on["requested.gaussiands.losses.depth"] == "True" and off["requested.gaussiands.losses.depth"] == "False"
+    assert on["dropped"] == f"gaussiands.losses.depth: {why}; priors.depth: {why}"
+    assert off["dropped"] == f"priors.depth: {why}"
+    plain = df[(df["metric"] == "psnr")]
+    assert "dropped" in BASE_COLUMNS and set(plain["dropped"]) >= {off["dropped"]}
 
 
 def test_cli_collect(runs: Path, capsys):

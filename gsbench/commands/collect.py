@@ -24,4 +24,8 @@ def run(args: argparse.Namespace) -> int:
     studies = sorted({("standalone" if (s is None or s != s) else str(s)) for s in df.drop_duplicates("run_id")["study"]})
     fmt = "Parquet" if out.suffix == ".parquet" else "CSV (pyarrow not installed)"
     print(f"collected {n_runs} runs, {len(df)} rows (studies: {', '.join(studies)}) -> {out} [{fmt}]")
+    runs = df.drop_duplicates("run_id")
+    n_dropped = int((runs["dropped"].fillna("") != "").sum())
+    if n_dropped:
+        print(f"{n_dropped} runs had settings dropped by the config resolver (column `dropped`)")
     return 0

@@ -10,8 +10,9 @@ from gsbench.errors import InputError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run_dir", nargs="?", type=Path, help="a trained run folder (writes RUN_DIR/results.json)")
-    parser.add_argument("--protocol", choices=["auto", "lerf", "3dovs"], default="auto",
-                        help="segmentation protocol (auto = every protocol the scene supports)")
+    parser.add_argument("--protocol", choices=["auto", "lerf", "3dovs"], default=None,
+                        help="segmentation protocol (auto = every protocol the scene supports; "
+                        "default: the run's eval.protocol)")
     parser.add_argument("--masks", type=Path, help="score a folder of predicted masks instead of a run")
     parser.add_argument("--layout", type=Path, help="with --masks: a LERF-OVS label folder (frame_*.json) "
                         "or a 3D-OVS scene folder (segmentations/)")
@@ -25,11 +26,11 @@ def _fmt(v) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench import evaluate
+    from gsbench import evaluation as evaluate
     if args.masks is not None:
         if args.run_dir is not None:
             raise InputError("give either RUN_DIR or --masks, not both")
-        if args.layout is None or args.protocol == "auto":
+        if args.layout is None or args.protocol in (None, "auto"):
             raise InputError("--masks needs --layout and --protocol lerf|3dovs")
         res = evaluate.score_mask_folder(args.masks, args.layout, args.protocol, args.out, args.boundary_ratio)
         out = args.out or args.masks
@@ -44,6 +45,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"{k:28s} {_fmt(v)}")
     for k, v in res.get("skipped", {}).items():
         print(f"skipped {k}: {v}")
+    for k, names in res.get("frames", {}).items():
+        print(f"frames {k} ({res.get('resolution', {}).get(k, '?')}): {len(names)}")
+    for k, v in res.get("frames_skipped", {}).items():
+        print(f"frame not scored {k}: {v}")
     if res.get("missing", {}).get("count"):
         print(f"missing predictions: {res['missing']['count']} (counted as IoU 0): "
               + ", ".join(res["missing"]["files"][:10]) + (" ..." if res["missing"]["count"] > 10 else ""))

@@ -1,0 +1,93 @@
+"""Frame sets named by protocol, and the camera each set is scored at.
+
+  reconstruction: the held-out test views (every 8th), at the training resolution;
+  reference:      the labelled frames that were trained on - what the references score;
+  held-out:       the labelled frames that were not trained on (a novel-view variant).
+reference + held-out = every labelled frame, so no label file goes unscored without a listed reason.
+Resolution (`eval.resolution`): "reference" scores 3D-OVS at the segmentation size divided by
+`eval.ovs3d_downsample` and LERF at each label file's size; "train" scores everything at the
+training resolution (the older behaviour, kept for comparison).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gsbench.datasets.splits import split_ids
+from gsbench.errors import InputError
+from gsbench.results import FRAME_SETS
+
+RESOLUTIONS = ("reference", "train")
+
+
+@dataclass
+class FrameSets:
+    trained: list[int]
+    reconstruction: list[int]
+    labelled: dict            # protocol -> sorted view ids with GT for it
+
+    def protocol_sets(self, protocol: str) -> dict[str, list[int]]:
+        """{"reference": [...], "held-out": [...]} of a segmentation protocol."""
+        trained = set(self.trained)
+        ids = self.labelled.get(protocol, [])
+        return {"reference": [i for i in ids if i in trained], "held-out": [i for i in ids if i not in trained]}
+
+
+def frame_sets(scene, config: dict) -> FrameSets:
+    trained, held = split_ids(scene, config)
+    labelled = {}
+    if scene.has_semantics:
+        labelled["3dovs"] = sorted(i for i in range(len(scene.cameras)) if _has_3dovs(scene, i))
+    if scene.has_labels:
+        labelled["lerf"] = sorted(i for i in range(len(scene.cameras)) if scene.gt_labels(i) is not None)
+    return FrameSets(trained=trained, reconstruction=held, labelled=labelled)
+
+
+def _has_3dovs(scene, i: int) -> bool:
+    ids = getattr(scene, "semantic_view_ids", None)
+    if ids:
+        return i in ids
+    return scene.gt_classes(i) is not None
+
+
+def view_name(scene, i: int) -> str:
+    return scene.cameras[i].name or str(i)
+
+
+def train_camera(camera, max_width):
+    """The camera at the training resolution (train.max_width, the rule training uses)."""
+    from gsbench.methods.base import training_size
+    w, h = training_size(camera, max_width)
+    return camera if (w, h) == (camera.width, camera.height) else camera.resized(w, h)
+
+
+def eval_settings(config: dict) -> tuple[str, int]:
+    ev = config.get("eval") or {}
+    res = ev.get("resolution", "reference")
+    if res not in RESOLUTIONS:
+        raise InputError(f"eval.resolution must be one of {', '.join(RESOLUTIONS)}, got {res!r}")
+    down = ev.get("ovs3d_downsample", 1)
+    if isinstance(down, bool) or not isinstance(down, int) or down < 1:
+        raise InputError(f"eval.ovs3d_downsample must be an integer >= 1, got {down!r}")
+    return res, down
+
+
+def segmentation_camera(scene, i: int, protocol: str, config: dict):
+    """The camera view i of `protocol` is scored at (see the module docstring)."""
+    res, down = eval_settings(config)
+    cam = scene.cameras[i]
+    if res == "train":
+        return train_camera(cam, (config.get("train") or {}).get("max_width"))
+    if protocol == "lerf":
+        w, h = scene.label_sizes.get(i, (cam.width, cam.height))
+    else:
+        w, h = max(1, cam.width // down), max(1, cam.height // down)
+    return cam if (w, h) == (cam.width, cam.height) else cam.resized(w, h)
+
+
+def size_text(cams) -> str:
+    """"WxH" when every camera has that size, else the distinct sizes joined by ", "."""
+    sizes = sorted({f"{c.width}x{c.height}" for c in cams})
+    return ", ".join(sizes)
+
+
+__all__ = ["FRAME_SETS", "FrameSets", "frame_sets", "segmentation_camera", "train_camera", "view_name"]

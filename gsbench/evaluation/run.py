@@ -1,0 +1,166 @@
+"""A trained run -> results.json: reconstruction metrics on the held-out views, FPS, segmentation
+per protocol / frame set / query mode, object removal, and the run's ordering statistics."""
+from __future__ import annotations
+
+import copy
+import logging
+import os
+import time
+from pathlib import Path
+from typing import Any, Optional
+
+from gsbench.results import ORDERING_METRICS, SEG_BASES, run_results, seg_metric
+from gsbench.store import read_json, write_json_atomic
+
+from .block import Block
+from .frames import frame_sets, train_camera, view_name
+from .image import fps, image_metrics
+from .removal import removal
+from .segmentation import query_mode, resolve_protocols, segmentation
+
+log = logging.getLogger(__name__)
+
+
+def _read_optional(path: Path) -> dict:
+    return read_json(path) if path.exists() else {}
+
+
+def _ordering(run_dir: Path) -> Block:
+    from gsbench.metrics import ordering as MO
+    out = Block()
+    summary = _read_optional(run_dir / "train_summary.json")
+    stats = (summary.get("info") or {}).get("priors_stats") or summary.get("priors_stats") or {}
+    impls = {"ordering_adjacent_distance": MO.ORDERING_DISTANCE_IMPL,
+             "ordering_adjacent_mask_iou": MO.ORDERING_MASK_IOU_IMPL}
+    for k in ORDERING_METRICS:
+        out.put(k, stats.get(k), impls.get(k),
+                "not in the run's priors stats (no masks/ordering prior for this method or scene)")
+    return out
+
+
+def _unscored(scene, fs, protocols: list[str], sets: dict) -> dict:
+    """Labelled frames that no frame set scores, with the reason (never dropped silently)."""
+    out = {}
+    for p, ids in fs.labelled.items():
+        if p not in protocols:
+            for i in ids:
+                out[f"{p}/{view_name(scene, i)}"] = f"protocol {p} not evaluated (--protocol)"
+            continue
+        scored = {i for v in sets[p].values() for i in v}
+        for i in ids:
+            if i not in scored:
+                raise RuntimeError(f"labelled {p} frame {view_name(scene, i)} is in no frame set")
+    return out
+
+
+def _memory(summary: dict) -> dict:
+    import torch
+
+    from gsbench.runs import peak_rss_mb
+    memory = {"peak_rss_mb": peak_rss_mb()}
+    if "peak_rss_mb" in summary:
+        memory["train_peak_rss_mb"] = summary["peak_rss_mb"]
+    for k in ("peak_cuda_mb", "train_peak_cuda_mb"):
+        if k in summary:
+            memory[k] = summary[k]
+    if torch.cuda.is_available():
+        memory["eval_peak_cuda_mb"] = torch.cuda.max_memory_allocated() / 2**20
+    return memory
+
+
+def requested_protocol(protocol: Optional[str], config: dict) -> str:
+    """The protocol argument when given, else the run config's eval.protocol (default auto)."""
+    return protocol or (config.get("eval") or {}).get("protocol") or "auto"
+
+
+def evaluate_run(run_dir: str | os.PathLike, protocol: Optional[str] = None, progress: bool = True) -> dict:
+    """Evaluate a trained run and write run_dir/results.json (schema: gsbench.results).
+    protocol None = the run config's eval.protocol."""
+    import torch
+
+    from gsbench.runs import env_info, load_run
+    run_dir = Path(run_dir)
+    t_start = time.time()
+    method, config, scene = load_run(run_dir)
+    protocol = requested_protocol(protocol, config)
+    mode = query_mode(config)
+    fs = frame_sets(scene, config)
+    max_width = (config.get("train") or {}).get("max_width")
+    rec_cams = [train_camera(scene.cameras[i], max_width) for i in fs.reconstruction]
+    protocols, pskip = resolve_protocols(scene, protocol)
+    sets = {p: fs.protocol_sets(p) for p in protocols}
+    out = Block()
+    with torch.no_grad():
+        out.merge(image_metrics(method, scene, fs.reconstruction, rec_cams, config, progress))
+        time_cams = rec_cams or [train_camera(scene.cameras[i], max_width) for i in fs.trained[:8]]
+        out.merge(fps(method, time_cams, config))
+        out.merge(segmentation(method, scene, protocols, sets, config))
+        out.merge(removal(method, scene, fs.reconstruction, rec_cams, config))
+    out.merge(_ordering(run_dir))
+    for p, why in pskip.items():
+        out.skip([seg_metric(b, p) for b in SEG_BASES[p]], why)
+    frames_skipped = _unscored(scene, fs, protocols, sets)
+
+    summary = _read_optional(run_dir / "train_summary.json")
+    train_status = _read_optional(run_dir / "status.json")
+    out.timings["train_s"] = summary.get("train_s", summary.get("wall_s"))
+    out.timings["eval_s"] = time.time() - t_start
+    providers = {}
+    try:
+        providers = dict(method.provider_ids() or {})
+    except AttributeError:
+        out.notes["providers"] = "method has no provider_ids()"
+    state = train_status.get("state", "done")
+    identity = {
+        "run_id": config.get("run_id", run_dir.name), "method": config.get("method"),
+        "scene": scene.name or Path(scene.path).name, "scene_path": str(scene.path), "seed": config.get("seed"),
+        "study": config.get("study") or _cell_field(run_dir, "study"), "grid": config.get("grid") or {},
+        "config": config, "providers": providers,
+        "backend": getattr(method, "backend", None) or config.get("backend"),
+        "protocol": protocols[0] if protocols else None, "protocols": protocols, "query_mode": mode,
+        "dropped": config.get("dropped", {}),
+    }
+    results = run_results(identity=identity, metrics=out.metrics, metric_impl=out.metric_impl,
+                          skipped=out.skipped, per_view=out.per_view,
+                          view_names=out.frames.get("reconstruction", []), frames=out.frames,
+                          frames_skipped=frames_skipped, resolution=out.resolution, notes=out.notes,
+                          timings=out.timings, memory=_memory(summary), machine=env_info(),
+                          status=state if state in ("done", "failed", "nonfinite") else "done")
+    write_json_atomic(run_dir / "results.json", results)
+    return results
+
+
+def _cell_field(run_dir: Path, key: str) -> Any:
+    p = run_dir / "cell.json"
+    return read_json(p).get(key) if p.exists() else None
+
+
+def segmentation_metrics(method, scene, view_ids: list[int], cams: list, config: dict) -> tuple[dict, dict]:
+    """(metrics, skipped) of the scene's segmentation protocols on the given views at the training
+    resolution, in the configured query mode: the same code as `evaluate_run`, for the trainer's
+    periodic evaluation. `cams` must be those views at the training resolution."""
+    import torch
+    mode = query_mode(config)
+    cfg = copy.deepcopy(config)
+    cfg.setdefault("eval", {})["resolution"] = "train"
+    protocols, pskip = resolve_protocols(scene, "auto")
+    ids = set(view_ids)
+    sets = {}
+    fs = frame_sets(scene, cfg)
+    for p in protocols:
+        sets[p] = {"held-out": [i for i in fs.labelled.get(p, []) if i in ids]}
+    with torch.no_grad():
+        out = segmentation(method, scene, protocols, sets, cfg, modes=(mode,))
+    metrics, skipped = {}, {}
+    for p in protocols:
+        for b in SEG_BASES[p]:
+            k = seg_metric(b, p, None, "held-out")
+            metrics[seg_metric(b, p)] = out.metrics.get(k)
+            if k in out.skipped:
+                skipped[seg_metric(b, p)] = out.skipped[k]
+    for p, why in pskip.items():
+        for b in SEG_BASES[p]:
+            metrics[seg_metric(b, p)] = None
+            skipped[seg_metric(b, p)] = why
+    return metrics, skipped
+

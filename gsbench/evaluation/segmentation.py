@@ -1,0 +1,175 @@
+"""3D-OVS and LERF-OVS scoring of a trained method, per query mode and frame set.
+
+Query modes: "encode" (the paper: text encoded into the latent space) and "decode" (LangSplat:
+latents decoded to CLIP space); each mode's metric ids end in "+query-<mode>". The un-suffixed
+names carry the configured `query.mode`. Frame sets: see gsbench.evaluation.frames.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Optional
+
+from gsbench.errors import InputError
+from gsbench.results import FRAME_SET_SUFFIX, QUERY_MODES, SEG_BASES, seg_metric
+
+from .block import Block, to_numpy
+from .frames import segmentation_camera, size_text, view_name
+from .labels import class_masks, scene_label_masks
+
+log = logging.getLogger(__name__)
+PROTOCOLS = ("auto", "lerf", "3dovs")
+
+
+def resolve_protocols(scene, protocol: str) -> tuple[list[str], dict]:
+    """Which segmentation protocols to run ({protocol: reason} for the others); `auto` = every one
+    the scene supports."""
+    if protocol not in PROTOCOLS:
+        raise InputError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+    skipped = {}
+    wanted = ["3dovs", "lerf"] if protocol == "auto" else [protocol]
+    out = []
+    for p in wanted:
+        if p == "3dovs" and not scene.has_semantics:
+            skipped["3dovs"] = "scene has no 3D-OVS class masks"
+        elif p == "lerf" and not scene.has_labels:
+            skipped["lerf"] = "scene has no LERF-OVS labels"
+        else:
+            out.append(p)
+    if protocol != "auto" and not out:
+        raise InputError(f"scene {scene.path}: protocol {protocol} requested but {skipped[protocol]}")
+    return out, skipped
+
+
+def _names(protocol: str, mode: str, configured: str, frame_set: str) -> dict[str, list[str]]:
+    """base -> the metric names one (mode, frame set) result is stored under."""
+    out = {}
+    for base in SEG_BASES[protocol]:
+        names = [seg_metric(base, protocol, mode, frame_set)]
+        if mode == configured:
+            names.append(seg_metric(base, protocol, None, frame_set))
+        out[base] = names
+    return out
+
+
+def _text(method, texts: list[str], mode: str):
+    t = method.embed_text(list(texts), mode)
+    return None if t is None else to_numpy(t)
+
+
+def _features(method, cam, mode: str):
+    f = method.semantic_features(cam, mode)
+    return None if f is None else to_numpy(f)
+
+
+def score_3dovs(method, scene, ids: list[int], config: dict, mode: str, configured: str,
+                frame_set: str) -> Block:
+    """3D-OVS metrics of frames `ids` in one query mode."""
+    from gsbench.metrics import ovs3d
+    out = Block()
+    names = _names("3dovs", mode, configured, frame_set)
+    every = [n for ns in names.values() for n in ns]
+    if not ids:
+        out.skip(every, f"no labelled 3D-OVS frame in the {frame_set} set")
+        return out
+    classes = list(scene.class_names)
+    text = _text(method, classes, mode)
+    if text is None:
+        out.skip(every, f"method {config.get('method')} has no semantic field")
+        return out
+    ratio = float((config.get("eval") or {}).get("boundary_dilation_ratio", 0.02))
+    views, cams = [], []
+    for i in ids:
+        cam = segmentation_camera(scene, i, "3dovs", config)
+        gt = class_masks(scene, i, classes, cam.width, cam.height)
+        feats = _features(method, cam, mode)
+        pred = None if feats is None else ovs3d.ovs3d_predict(feats, text)
+        views.append(ovs3d.Ovs3dView(view_name(scene, i), pred, gt))
+        cams.append(cam)
+    r = ovs3d.evaluate_ovs3d_scene(views, classes, missing="error", dilation_ratio=ratio)
+    impl = f"{r.impl}+{ovs3d.PIXEL_ACC_IMPL['reference']}"
+    vals = {"miou": (r.miou, r.impl), "mbiou": (r.mbiou, r.impl), "pixel_acc": (r.pixel_acc, impl),
+            "pixel_acc_labelled": (r.pixel_acc_labelled, f"{r.impl}+{ovs3d.PIXEL_ACC_IMPL['labelled']}")}
+    for base, (value, base_impl) in vals.items():
+        pv = [v[base] for v in r.per_view]
+        reason = "no view with a GT pixel (labelled pixel accuracy undefined)" if value is None else None
+        for n in names[base]:
+            out.put(n, value, f"{base_impl}+query-{mode}", reason, per_view=pv)
+    if r.skipped:
+        out.notes[f"3dovs_{mode}{FRAME_SET_SUFFIX[frame_set]}_views"] = "; ".join(
+            f"{s['view']}: {s['reason']}" for s in r.skipped)
+    out.frames[f"3dovs/{frame_set}"] = [v.name for v in views]
+    out.resolution[f"3dovs/{frame_set}"] = size_text(cams)
+    return out
+
+
+def score_lerf(method, scene, ids: list[int], config: dict, mode: str, configured: str, frame_set: str) -> Block:
+    """LERF-OVS metrics of frames `ids` in one query mode (relevancy against the canonical negatives)."""
+    from gsbench.metrics import lerf
+    out = Block()
+    names = _names("lerf", mode, configured, frame_set)
+    every = [n for ns in names.values() for n in ns]
+    if not ids:
+        out.skip(every, f"no labelled LERF frame in the {frame_set} set")
+        return out
+    neg = _text(method, list(lerf.CANONICAL_NEGATIVES), mode)
+    if neg is None:
+        out.skip(every, f"method {config.get('method')} has no semantic field")
+        return out
+    kmode = (config.get("eval") or {}).get("lerf_kernels", "auto")
+    pairs, cams, kernels = [], [], None
+    for i in ids:
+        cam = segmentation_camera(scene, i, "lerf", config)
+        k = lerf.lerf_kernels(cam.width, kmode)
+        if kernels is not None and k != kernels:
+            raise InputError(f"scene {scene.path}: label files of different widths give different LERF kernels; "
+                             "set eval.lerf_kernels: reference")
+        kernels = k
+        masks, boxes = scene_label_masks(scene, i, cam.width, cam.height)
+        queries = list(masks)
+        feats = _features(method, cam, mode)
+        rel = None
+        if feats is not None and queries:
+            rel = lerf.lerf_relevancy(feats, _text(method, queries, mode), neg)
+        for k_, q in enumerate(queries):
+            pairs.append(lerf.LerfPair(view_name(scene, i), q, None if rel is None else rel[k_], masks[q], boxes[q]))
+        cams.append(cam)
+    frame_names = [view_name(scene, i) for i in ids]
+    if not pairs:
+        out.skip(every, f"the {frame_set} label files hold no (frame, query) pair")
+        return out
+    r = lerf.evaluate_lerf_scene(pairs, missing="error", kernels=kernels)
+    by_view: dict[str, list] = {}
+    for pp in r.per_pair:
+        if pp["iou"] is not None:
+            by_view.setdefault(pp["frame"], []).append(pp["iou"])
+    view_iou = [sum(by_view[n]) / len(by_view[n]) if by_view.get(n) else None for n in frame_names]
+    for n in names["miou"]:
+        out.put(n, r.miou, f"{r.impl}+query-{mode}", "no pair with a non-empty GT mask", per_view=view_iou)
+    for n in names["loc_acc"]:
+        out.put(n, r.loc_acc, f"{r.impl}+query-{mode}", "no pair with GT boxes")
+    if r.skipped:
+        out.notes[f"lerf_{mode}{FRAME_SET_SUFFIX[frame_set]}_pairs"] = "; ".join(
+            f"{s['frame']}/{s['query']}: {s['reason']}" for s in r.skipped)
+    out.frames[f"lerf/{frame_set}"] = frame_names
+    out.resolution[f"lerf/{frame_set}"] = size_text(cams)
+    return out
+
+
+def segmentation(method, scene, protocols: list[str], sets: dict, config: dict,
+                 modes: tuple = QUERY_MODES) -> Block:
+    """Every protocol x frame set x query mode. sets: protocol -> {frame set: ids}."""
+    configured = query_mode(config)
+    out = Block()
+    for p in protocols:
+        fn = score_3dovs if p == "3dovs" else score_lerf
+        for frame_set, ids in sets[p].items():
+            for m in modes:
+                out.merge(fn(method, scene, ids, config, m, configured, frame_set))
+    return out
+
+
+def query_mode(config: dict, default: Optional[str] = "encode") -> str:
+    mode = (config.get("query") or {}).get("mode", default)
+    if mode not in QUERY_MODES:
+        raise InputError(f"query.mode must be one of {', '.join(QUERY_MODES)}, got {mode!r}")
+    return mode
