@@ -23,7 +23,7 @@ def test_preset_then_overrides():
     assert c["train"]["max_width"] is None and c["train"]["background"] == [1, 1, 1]
     assert c["gaussiands"]["losses"]["ds"] is False
     assert c["train"]["densify"]["enabled"] is True                  # untouched keys keep the default
-    assert parse_overrides({"a.b": 1}) == {"a": {"b": 1}}
+    assert parse_overrides({"a": {"b": 1}}) == {"a.b": 1} == parse_overrides(["a.b=1"])
 
 
 @pytest.mark.parametrize("bad", [["train.iteration=5"], ["nokey=1"], ["train.iterations"], ["gaussiands.depth_formulation=foo"],

@@ -15,8 +15,9 @@ from gsbench.errors import InputError
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--grid", help="a shipped grid name (see --list) or a grid YAML file")
     parser.add_argument("--out", type=Path, help="RUNS_DIR: one run folder per cell, shared scenes and priors cache")
-    parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
-                        help="override config keys in every cell (e.g. train.iterations=30); may not be a grid axis")
+    parser.add_argument("--set", dest="overrides", nargs="+", action="append", default=[], metavar="KEY=VALUE",
+                        help="override config keys in every cell (e.g. train.iterations=30; repeatable); "
+                        "may not be a grid axis")
     parser.add_argument("--executor", choices=["local", "submitit", "serial"], default="local",
                         help="local = process pool (--jobs), submitit = SLURM job arrays (--cluster), "
                         "serial = this process, one cell after another (debugging)")
@@ -39,6 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from gsbench import grids
+    from gsbench.config import parse_overrides, set_args
     if args.list:
         for name in grids.shipped_grids():
             g = grids.load_grid(name)
@@ -46,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.out is None:
         raise InputError("--out RUNS_DIR is required")
-    extra = grids.parse_set(args.set)
+    extra = parse_overrides(set_args(args.overrides))
     if args.status:
         grid = grids.load_grid(args.grid, extra_set=extra) if args.grid else None
         if not args.out.is_dir():
@@ -62,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{c.method:10s} {c.scene.label:24s} seed={c.seed} " + " ".join(f"{k}={v}" for k, v in c.axes.items()))
         print(f"{len(grid.cells())} cells")
         return 0
-    from gsbench.executors import make_executor
+    from gsbench.grids.executors import make_executor
     slurm = {"slurm_partition": args.slurm_partition, "timeout_min": args.timeout_min,
              "cpus_per_task": args.cpus_per_task, "gpus_per_node": args.gpus_per_node}
     if args.cluster != "slurm":
