@@ -12,29 +12,13 @@ import time
 from pathlib import Path
 from typing import Optional
 
+from gsbench.runlock import pid_alive
 from gsbench.store import read_json, write_json_atomic
 
 CELL_FILE = "cell.json"
 CELL_STATUS_FILE = "cell_status.json"
 HEARTBEAT_S = 10.0
 STALE_AFTER_S = 120.0
-
-
-def pid_alive(pid: int) -> bool:
-    """True when `pid` is a live process. A zombie (killed, not yet reaped: workers of a killed
-    grid are re-parented to an init that may never reap them) counts as dead."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return True   # no /proc (not Linux): trust kill(0)
-    # the state letter follows the parenthesised command name, which may itself contain spaces
-    return stat[stat.rfind(")") + 2:][:1] not in ("Z", "X")
 
 
 def read_cell_status(run_dir: Path) -> dict:

@@ -17,6 +17,7 @@ from gsbench.grids.liveness import CELL_FILE, CELL_STATUS_FILE, HEARTBEAT_S, cel
 from gsbench.grids.planning import PlannedCell, plan, write_manifest
 from gsbench.grids.priors_share import shared_priors
 from gsbench.grids.spec import Grid
+from gsbench.runlock import RunLock, RunLockedError
 from gsbench.store import write_json_atomic
 
 log_ = logging.getLogger(__name__)
@@ -49,9 +50,20 @@ class _Heartbeat:
 
 def run_cell(spec: dict) -> dict:
     """Train then evaluate one cell in its run folder; never raises for a failing cell (the failure
-    is written to cell_status.json and returned), so one bad cell does not stop a grid."""
+    is written to cell_status.json and returned), so one bad cell does not stop a grid.
+
+    The cell holds the folder's writer lock for train + eval; a stale lock (its holder was killed)
+    is taken over, a live one leaves the cell alone (state "locked", nothing written)."""
     run_dir = Path(spec["run_dir"])
-    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        with RunLock(run_dir, command=f"gsbench ablate cell {run_dir.name} (pid {os.getpid()})"):
+            return _run_cell_locked(spec, run_dir)
+    except RunLockedError as e:
+        log_.warning("%s", e)
+        return {"run_dir": str(run_dir), "state": "locked", "error": str(e), "wall_s": 0.0}
+
+
+def _run_cell_locked(spec: dict, run_dir: Path) -> dict:
     prev = read_cell_status(run_dir)
     status = {"state": "running", "pid": os.getpid(), "host": socket.gethostname(), "started": time.time(),
               "heartbeat": time.time(), "attempt": int(prev.get("attempt", 0)) + 1, "phase": "train",
