@@ -38,9 +38,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true")
 
 
-def run(args: argparse.Namespace) -> int:
+def grid_from_args(args: argparse.Namespace):
+    """The grid this command runs: the grid file with every --set applied to its base (None without --grid)."""
     from gsbench import grids
     from gsbench.config import parse_overrides, set_args
+    extra = parse_overrides(set_args(args.overrides))
+    if not args.grid:
+        if extra:
+            raise InputError("--set applies to the cells of a grid: give --grid too")
+        return None
+    return grids.load_grid(args.grid, extra_set=extra)
+
+
+def run(args: argparse.Namespace) -> int:
+    from gsbench import grids
     if args.list:
         for name in grids.shipped_grids():
             g = grids.load_grid(name)
@@ -48,17 +59,15 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.out is None:
         raise InputError("--out RUNS_DIR is required")
-    extra = parse_overrides(set_args(args.overrides))
+    grid = grid_from_args(args)
     if args.status:
-        grid = grids.load_grid(args.grid, extra_set=extra) if args.grid else None
         if not args.out.is_dir():
             raise InputError(f"{args.out}: runs folder not found")
         rows = grids.status_rows(args.out, grid)
         print(grids.format_status(rows))
         return 0
-    if not args.grid:
+    if grid is None:
         raise InputError("--grid is required (a shipped name or a YAML file; --list shows the shipped ones)")
-    grid = grids.load_grid(args.grid, extra_set=extra)
     if args.dry_run:
         for c in grid.cells():
             print(f"{c.method:10s} {c.scene.label:24s} seed={c.seed} " + " ".join(f"{k}={v}" for k, v in c.axes.items()))

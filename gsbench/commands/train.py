@@ -18,12 +18,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
-def run(args: argparse.Namespace) -> int:
+def config_from_args(args: argparse.Namespace) -> dict:
+    """The config this command trains with (default <- --preset <- every --set)."""
     from gsbench.config import load_config, set_args
+    return load_config(args.method, args.preset, set_args(args.overrides))
+
+
+def run(args: argparse.Namespace) -> int:
     from gsbench.runs import train_run
     from gsbench.store import read_json
 
-    cfg = load_config(args.method, args.preset, set_args(args.overrides))
+    cfg = config_from_args(args)
     out = train_run(cfg, Path(args.scene), Path(args.out), progress=not args.no_progress)
     s = read_json(out / "train_summary.json")
     ev = s.get("last_eval") or {}

@@ -5,15 +5,13 @@ traceback. `stale` = marked running but its process is gone (same host) or its h
 """
 from __future__ import annotations
 
-import os
 import socket
-import threading
 import time
 from pathlib import Path
 from typing import Optional
 
 from gsbench.runlock import pid_alive
-from gsbench.store import read_json, write_json_atomic
+from gsbench.store import read_json
 
 CELL_FILE = "cell.json"
 CELL_STATUS_FILE = "cell_status.json"
