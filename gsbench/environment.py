@@ -5,7 +5,8 @@
 `PeakMemory` measures the peak of a phase (training, evaluation) on its own. ru_maxrss is the peak of
 the whole process, so a process that ran a bigger run before would report that run's peak; on Linux
 the peak (VmHWM) is reset at the start of the phase by writing 5 to /proc/self/clear_refs, and on
-CUDA the allocator's peak by torch.cuda.reset_peak_memory_stats. Where the reset is not possible
+CUDA the allocator's peak by torch.cuda.reset_peak_memory_stats. (Linux derives ru_maxrss from the
+same counter, so after a reset ru_maxrss too reports the peak since the reset.) Where the reset is not possible
 the figure is the process lifetime peak, and `rss_source` says so. Grid cells also run in a fresh
 process each (gsbench.grids.executors), so nothing carries over between cells either way.
 """
