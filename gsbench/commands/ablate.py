@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     from concurrent.futures.process import BrokenProcessPool
     try:
         report = grids.run_grid(grid, args.out, executor, retry_failed=args.retry_failed,
-                                share_priors=not args.no_shared_priors)
+                                share_priors=not args.no_shared_priors, log=print)
     except BrokenProcessPool as e:
         print(f"gsbench ablate: a worker process died ({e}); finished cells are saved, re-run to resume "
               "the others (see --status)", file=sys.stderr)
