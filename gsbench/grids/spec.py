@@ -1,7 +1,7 @@
 """Grid files: parse and validate a grid YAML into a Grid, and expand it into cells.
 
-A grid file names a base config, scenes, seeds and axes (the format is in gsbench/grids/__init__.py
-and docs/grids.md). Every value (base.set, axes, sweeps, extra cells, `ablate --set`) goes through
+A grid file names a base config, scenes, seeds and axes (the format is in docs/grids.md).
+Every value (base.set, axes, sweeps, extra cells, `ablate --set`) goes through
 gsbench.config.check_value, the one checker of config keys, types and ranges.
 """
 from __future__ import annotations
