@@ -137,19 +137,14 @@ def _unknown_key(key: str, leaves: Mapping[str, Any], where: str) -> InputError:
     return InputError(f"{where}: unknown config key {key!r} (not in gsbench/configs/default.yaml){hint}")
 
 
+_KINDS = ((bool, "bool"), (int, "int"), (float, "float"), (str, "str"), (list, "list"), (dict, "dict"))  # bool first
+
+
 def _kind(default: Any, rule: Optional[Rule]) -> Optional[str]:
-    if isinstance(default, bool):
-        return "bool"
-    if isinstance(default, int):
-        return "int"
-    if isinstance(default, float):
-        return "float"
-    if isinstance(default, str):
-        return "str"
-    if isinstance(default, list):
-        return "list"
-    if isinstance(default, dict):
-        return "dict"
+    """The type a key takes: that of its default, or the rule's `kind` where the default is null."""
+    for t, name in _KINDS:
+        if isinstance(default, t):
+            return name
     return rule.kind if rule is not None else None
 
 
