@@ -158,6 +158,7 @@ def check_value(key: str, value: Any, leaves: Mapping[str, Any], where: str) -> 
         raise _unknown_key(key, leaves, where)
     rule = RULES.get(key)
     kind = _kind(default, rule)
+    given = value
     if value is None:
         if default is None or (rule is not None and rule.nullable):
             return None
@@ -177,7 +178,7 @@ def check_value(key: str, value: Any, leaves: Mapping[str, Any], where: str) -> 
     if expected is not None and not isinstance(value, expected):
         raise InputError(f"{where}: {key} must be a {'mapping' if kind == 'dict' else kind}, got {value!r}")
     if rule is not None and not rule.admits(value):
-        raise InputError(f"{where}: {key}={value!r} is out of range: must be {rule.describe()}")
+        raise InputError(f"{where}: {key}={given!r} is out of range: must be {rule.describe()}")
     return copy.deepcopy(value)
 
 
