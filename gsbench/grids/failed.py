@@ -14,7 +14,7 @@ def write_failed_results(spec: dict, run_dir: Path, status: dict) -> dict:
     """results.json of a failed cell (schema: gsbench.store): status "failed", every metric null and
     the error in skipped["run"]. Identity fields come from the run's config.json when training got
     that far (the resolved config), else from the cell's config."""
-    from gsbench.evaluate import machine_info
+    from gsbench.environment import env_info
     from gsbench.store import RESULTS_VERSION
     cfg_path = run_dir / "config.json"
     config = spec.get("config") or {}
@@ -42,7 +42,7 @@ def write_failed_results(spec: dict, run_dir: Path, status: dict) -> dict:
         "protocol": protocols[0] if protocols else None, "protocols": protocols, "metric_impl": {},
         "metrics": {m: None for m in FAILED_METRICS}, "per_view": {}, "view_names": [],
         "skipped": {"run": reason}, "timings": {"train_s": None, "eval_s": None, "cell_wall_s": status.get("wall_s")},
-        "memory": {}, "machine": machine_info(), "status": "failed", "dropped": config.get("dropped", {}),
+        "memory": {}, "machine": env_info(), "status": "failed", "dropped": config.get("dropped", {}),
     }
     write_json_atomic(run_dir / "results.json", results)
     return results
