@@ -4,31 +4,52 @@
     rid = run_id(cfg, scene_fingerprint(path))
     cfg, dropped = resolve_for_scene(cfg, scene)   # drops what the scene cannot feed or nothing uses
 
-Override values are parsed as YAML (`1e-3`, `true`, `[1, 2]`, `null`). Unknown keys are an error
-(a typo must not silently do nothing). Presets live in gsbench/configs/<name>.yaml or are a path.
+This module is the one path by which a value enters a config: `gsbench train --set`, `gsbench
+ablate --set`, presets and grid files (base.set, axes, sweeps, extra cells) all go through
+`parse_overrides` (strings or mappings -> {dotted key: value}) and `check_value` / `apply_overrides`
+(key known, type as in default.yaml, range or choices as in gsbench/config_keys.py). Values are
+read by one YAML reader (`load_yaml`), which reads `1e-4` as a number (YAML 1.1 would read a string). Unknown keys are an error with close-match suggestions (a typo must not silently do
+nothing). A preset is a shipped name (gsbench/configs/<name>.yaml) or a path to a YAML file.
 """
 from __future__ import annotations
 
 import copy
-import re
+import difflib
 import hashlib
 import json
+import re
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping, Optional
 
 import yaml
 
+from gsbench.config_keys import FREE_MAPPINGS, METHODS, RULES, Rule
 from gsbench.errors import InputError
 
 CONFIG_DIR = Path(__file__).parent / "configs"
-from gsbench.methods.registry import METHODS  # noqa: E402  (live: the registered method names)
 # keys that do not change what a run computes (where files go, how often it logs)
 NON_RESULT_KEYS = (("priors", "cache_dir"),)
+_NO_DEFAULT = object()
+
+
+class _Loader(yaml.SafeLoader):
+    """PyYAML's safe loader (YAML 1.1) reads `1e-4` as a string; this one reads it as a float, as YAML 1.2
+    does. A quoted "1e-4" stays a string."""
+
+
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float",
+                              re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+                              list("-+0123456789"))
+
+
+def load_yaml(text: str) -> Any:
+    """The one YAML reader of configs, presets, grid files and `--set` values."""
+    return yaml.load(text, Loader=_Loader)
 
 
 def _read_yaml(path: Path) -> dict:
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = load_yaml(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputError(f"{path}: config file not found") from None
     except yaml.YAMLError as e:
@@ -40,108 +61,182 @@ def _read_yaml(path: Path) -> dict:
     return data
 
 
-def _merge(base: dict, over: Mapping, where: str, path: str = "") -> dict:
-    for k, v in over.items():
-        key = f"{path}{k}"
-        if k not in base:
-            raise InputError(f"{where}: unknown config key {key!r}")
-        if isinstance(base[k], dict) and isinstance(v, Mapping):
-            _merge(base[k], v, where, key + ".")
-        elif (isinstance(base[k], (int, float)) and not isinstance(base[k], bool)
-              and isinstance(v, (str, bool, list, Mapping))):     # a number (or null) is expected
-            raise InputError(f"{where}: {key} must be a number (default {base[k]!r}), got {v!r}")
+def default_tree() -> dict:
+    """The full default tree; its leaves are the keys (and their types) every config is checked against."""
+    return _read_yaml(CONFIG_DIR / "default.yaml")
+
+
+def flatten(tree: Mapping, prefix: str = "") -> dict[str, Any]:
+    """Leaves of a nested mapping as {dotted.key: value}; keys may already be dotted. Empty mappings
+    and the free-form mappings of FREE_MAPPINGS are leaves."""
+    out: dict[str, Any] = {}
+    for k, v in tree.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping) and v and key not in FREE_MAPPINGS:
+            out.update(flatten(v, key + "."))
         else:
-            base[k] = copy.deepcopy(v)
-    return base
-
-
-_FLOAT_RE = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
-
-
-def _number_or_value(v: Any) -> Any:
-    """YAML 1.1 reads '1e-4' / '1e38' as strings; a command-line user means the number."""
-    if isinstance(v, str) and _FLOAT_RE.match(v.strip()):
-        return float(v)
-    return v
-
-
-def parse_overrides(overrides: Mapping | list[str] | None) -> dict:
-    """["a.b=1", ...] or {"a.b": 1} -> nested dict (values parsed as YAML)."""
-    if not overrides:
-        return {}
-    items: list[tuple[str, Any]] = []
-    if isinstance(overrides, Mapping):
-        items = list(overrides.items())
-    else:
-        for s in overrides:
-            if "=" not in s:
-                raise InputError(f"--set {s!r}: expected key=value (e.g. train.iterations=300)")
-            k, v = s.split("=", 1)
-            try:
-                items.append((k.strip(), _number_or_value(yaml.safe_load(v))))
-            except yaml.YAMLError as e:
-                raise InputError(f"--set {s!r}: value is not valid YAML ({e})") from None
-    out: dict = {}
-    for k, v in items:
-        parts = [p for p in str(k).split(".") if p]
-        if not parts:
-            raise InputError(f"--set: empty key in {k!r}")
-        d = out
-        for p in parts[:-1]:
-            d = d.setdefault(p, {})
-            if not isinstance(d, dict):
-                raise InputError(f"--set: {k!r} conflicts with another override")
-        d[parts[-1]] = v
+            out[key] = v
     return out
 
 
-def preset_path(preset: str) -> Path:
+def get_dotted(tree: Mapping, key: str) -> Any:
+    """tree["a"]["b"] for "a.b"; KeyError when a part is missing."""
+    node: Any = tree
+    for part in key.split("."):
+        if not isinstance(node, Mapping) or part not in node:
+            raise KeyError(key)
+        node = node[part]
+    return node
+
+
+def set_dotted(tree: dict, key: str, value: Any) -> None:
+    parts = key.split(".")
+    node = tree
+    for part in parts[:-1]:
+        node = node.setdefault(part, {})
+    node[parts[-1]] = value
+
+
+def parse_overrides(overrides: Mapping | Iterable[str] | None, where: str = "--set") -> dict[str, Any]:
+    """["a.b=1", ...] (values read as YAML) or a mapping (dotted or nested keys) -> {dotted key: value}.
+
+    Only the syntax is checked here; `apply_overrides` checks keys and values."""
+    if not overrides:
+        return {}
+    if isinstance(overrides, Mapping):
+        return flatten(overrides)
+    if isinstance(overrides, str):
+        overrides = [overrides]
+    out: dict[str, Any] = {}
+    for item in overrides:
+        if not isinstance(item, str) or "=" not in item:
+            raise InputError(f"{where} {item!r}: expected key=value (e.g. train.iterations=300)")
+        k, v = item.split("=", 1)
+        key = k.strip()
+        if not key or any(not p for p in key.split(".")):
+            raise InputError(f"{where} {item!r}: empty key")
+        try:
+            out[key] = load_yaml(v) if v.strip() else None
+        except yaml.YAMLError as e:
+            raise InputError(f"{where} {item!r}: value is not valid YAML ({e})") from None
+    return out
+
+
+def set_args(groups: Iterable[Iterable[str]] | None) -> list[str]:
+    """The `--set` items of argparse's append+nargs form ([["a=1", "b=2"], ["c=3"]]) as one list, so
+    `--set a=1 b=2` and `--set a=1 --set b=2` mean the same in every command."""
+    return [item for group in (groups or []) for item in ([group] if isinstance(group, str) else group)]
+
+
+def _unknown_key(key: str, leaves: Mapping[str, Any], where: str) -> InputError:
+    section = [k for k in leaves if k.startswith(key + ".")]
+    if section:
+        return InputError(f"{where}: unknown config key {key!r} (a section; set one of its keys, e.g. {section[0]})")
+    close = difflib.get_close_matches(key, list(leaves), n=3, cutoff=0.5)
+    hint = f"; did you mean {', '.join(close)}?" if close else ""
+    return InputError(f"{where}: unknown config key {key!r} (not in gsbench/configs/default.yaml){hint}")
+
+
+_KINDS = ((bool, "bool"), (int, "int"), (float, "float"), (str, "str"), (list, "list"), (dict, "dict"))  # bool first
+
+
+def _kind(default: Any, rule: Optional[Rule]) -> Optional[str]:
+    """The type a key takes: that of its default, or the rule's `kind` where the default is null."""
+    for t, name in _KINDS:
+        if isinstance(default, t):
+            return name
+    return rule.kind if rule is not None else None
+
+
+def check_value(key: str, value: Any, leaves: Mapping[str, Any], where: str) -> Any:
+    """The value `key` takes from `value`, or an InputError naming the key and what it accepts.
+
+    Type from the default (a bool only from true/false, a number only from a number; a whole float
+    such as 3e4 becomes an int for an integer key), then range or choices."""
+    default = leaves.get(key, _NO_DEFAULT)
+    if default is _NO_DEFAULT:
+        raise _unknown_key(key, leaves, where)
+    rule = RULES.get(key)
+    kind = _kind(default, rule)
+    given = value
+    if value is None:
+        if default is None or (rule is not None and rule.nullable):
+            return None
+        raise InputError(f"{where}: {key} cannot be null (default {default!r})")
+    if kind == "bool" and not isinstance(value, bool):
+        raise InputError(f"{where}: {key} must be true/false, got {value!r}")
+    if kind in ("int", "float"):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"{where}: {key} must be a number (default {default!r}), got {value!r}")
+        if kind == "int" or (rule is not None and rule.integer):
+            if isinstance(value, float) and not value.is_integer():
+                raise InputError(f"{where}: {key} must be a whole number, got {value!r}")
+            value = int(value)
+        else:
+            value = float(value)
+    expected = {"str": str, "list": list, "dict": dict}.get(kind or "")
+    if expected is not None and not isinstance(value, expected):
+        raise InputError(f"{where}: {key} must be a {'mapping' if kind == 'dict' else kind}, got {value!r}")
+    if rule is not None and not rule.admits(value):
+        raise InputError(f"{where}: {key}={given!r} is out of range: must be {rule.describe()}")
+    return copy.deepcopy(value)
+
+
+def apply_overrides(tree: dict, overrides: Mapping[str, Any], where: str = "--set",
+                    leaves: Optional[Mapping[str, Any]] = None) -> dict:
+    """Check each {dotted key: value} against default.yaml and the rules, then set it in `tree`."""
+    leaves = flatten(default_tree()) if leaves is None else leaves
+    for key, value in overrides.items():
+        set_dotted(tree, key, check_value(key, value, leaves, where))
+    return tree
+
+
+def preset_path(preset: str | Path) -> Path:
+    """A shipped preset name or a path to a YAML file."""
     p = Path(preset)
-    if p.suffix in (".yaml", ".yml") and p.exists():
-        return p
+    if p.suffix in (".yaml", ".yml"):
+        if p.is_file():
+            return p
+        raise InputError(f"preset {str(preset)!r}: file not found")
     q = CONFIG_DIR / f"{preset}.yaml"
     if not q.exists():
         names = sorted(x.stem for x in CONFIG_DIR.glob("*.yaml") if x.stem != "default")
-        raise InputError(f"unknown preset {preset!r} (no {q}); presets: {', '.join(names)}")
+        raise InputError(f"unknown preset {str(preset)!r} (no {q}); presets: {', '.join(names)} or a .yaml path")
     return q
 
 
-def load_config(method: str, preset: str | None = None, overrides: Mapping | list[str] | None = None) -> dict:
+def load_tree(preset: str | Path | None = None, overrides: Mapping | Iterable[str] | None = None,
+              where: str = "--set") -> dict:
+    """default.yaml <- preset <- overrides, every value checked (no method bookkeeping)."""
+    tree = default_tree()
+    leaves = flatten(tree)
+    if preset:
+        p = preset_path(preset)
+        apply_overrides(tree, parse_overrides(_read_yaml(p), str(p)), str(p), leaves)
+    apply_overrides(tree, parse_overrides(overrides, where), where, leaves)
+    return tree
+
+
+def load_config(method: str, preset: str | Path | None = None,
+                overrides: Mapping | Iterable[str] | None = None) -> dict:
     """default.yaml <- preset <- overrides; `method` sets the `method` key (an override cannot change it)."""
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    cfg = _read_yaml(CONFIG_DIR / "default.yaml")
-    if preset:
-        p = preset_path(preset)
-        _merge(cfg, _read_yaml(p), str(p))
-    _merge(cfg, parse_overrides(overrides), "--set")
-    if cfg.get("method") not in (None, method) and overrides and "method" in parse_overrides(overrides):
-        raise InputError(f"--set method={cfg['method']} contradicts --method {method}")
+    flat = parse_overrides(overrides)
+    if flat.get("method", method) != method:
+        raise InputError(f"--set method={flat['method']} contradicts --method {method}")
+    cfg = load_tree(preset, flat)
     cfg["method"] = method
     validate(cfg)
     return cfg
 
 
-def validate(cfg: dict) -> None:
-    """Checks of values that would otherwise fail deep inside training."""
-    from gsbench.methods.losses import DEPTH_FORMULATIONS
-    g = cfg["gaussiands"]
-    if g["depth_formulation"] not in DEPTH_FORMULATIONS:
-        raise InputError(f"gaussiands.depth_formulation={g['depth_formulation']!r}: choose one of {', '.join(DEPTH_FORMULATIONS)}")
-    if not isinstance(g["latent_dim"], int) or g["latent_dim"] < 1:
-        raise InputError(f"gaussiands.latent_dim={g['latent_dim']!r}: must be an integer >= 1")
-    if cfg["query"]["mode"] not in ("encode", "decode"):
-        raise InputError(f"query.mode={cfg['query']['mode']!r}: choose encode or decode")
-    t = cfg["train"]
-    if not isinstance(t["iterations"], int) or t["iterations"] < 0:
-        raise InputError(f"train.iterations={t['iterations']!r}: must be an integer >= 0")
-    if t["max_width"] is not None and (not isinstance(t["max_width"], int) or t["max_width"] < 1):
-        raise InputError(f"train.max_width={t['max_width']!r}: must be null or an integer >= 1")
-    if t["init"]["mode"] not in ("auto", "points", "random"):
-        raise InputError(f"train.init.mode={t['init']['mode']!r}: choose auto, points or random")
-    for k, v in g["lambdas"].items():
-        if not isinstance(v, (int, float)) or v < 0:
-            raise InputError(f"gaussiands.lambdas.{k}={v!r}: must be a number >= 0")
+def validate(cfg: Mapping) -> None:
+    """Check every key of a whole config tree (one written by hand or read back from config.json)."""
+    leaves = flatten(default_tree())
+    for key, value in flatten({k: v for k, v in cfg.items() if k in leaves or
+                               any(x.startswith(k + ".") for x in leaves)}).items():
+        check_value(key, value, leaves, "config")
 
 
 def _canonical(cfg: dict) -> dict:
@@ -171,4 +266,5 @@ def resolve_for_scene(config: dict, scene) -> tuple[dict, dict]:
     return resolve(config, scene)
 
 
-__all__ = ["load_config", "run_id", "resolve_for_scene", "parse_overrides", "validate", "METHODS"]
+__all__ = ["load_config", "load_tree", "run_id", "resolve_for_scene", "parse_overrides", "apply_overrides",
+           "check_value", "load_yaml", "set_args", "validate", "preset_path", "default_tree", "flatten", "get_dotted", "set_dotted", "METHODS"]

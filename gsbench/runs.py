@@ -5,17 +5,16 @@
 
 Files (see gsbench/store.py): config.json (resolved: scene, run_id, dropped), env.json, status.json,
 train_log.jsonl, checkpoint.pt (trainer state, for resume), model.pt (the trained Method),
-train_summary.json (train_s, peak_rss_mb, iterations, n_gaussians, providers, dropped, backend, status).
+train_summary.json (train_s, peak_rss_mb, rss_source, train_peak_cuda_mb on CUDA, iterations,
+n_gaussians, providers, dropped, backend, status). The memory figures are the peaks of this run's
+training alone (gsbench.environment.PeakMemory), not of the process that ran it.
 A folder whose status is "done" is not retrained; one with a checkpoint resumes from it.
+Only one process writes a run folder at a time (gsbench.runlock: a second one exits with the holder).
 """
 from __future__ import annotations
 
+import logging
 import os
-import platform
-import resource
-import socket
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -23,28 +22,13 @@ import numpy as np
 import torch
 
 from gsbench.config import resolve_for_scene, run_id
+from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError, NonFiniteError
+from gsbench.runlock import RunLock
 from gsbench.store import read_json, write_json_atomic
 
+log = logging.getLogger(__name__)
 MODEL = "model.pt"
-
-
-def peak_rss_mb() -> float:
-    """Peak resident memory of this process (Linux reports KiB)."""
-    r = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return float(r) / (1024.0 * 1024.0) if sys.platform == "darwin" else float(r) / 1024.0
-
-
-def env_info() -> dict:
-    sha = None
-    try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True,
-                             text=True, timeout=5).stdout.strip() or None
-    except Exception:  # git missing or not a checkout: recorded as None
-        sha = None
-    return {"python": sys.version.split()[0], "torch": torch.__version__, "numpy": np.__version__,
-            "platform": platform.platform(), "host": socket.gethostname(), "cpu_count": os.cpu_count(),
-            "torch_threads": torch.get_num_threads(), "git_sha": sha}
 
 
 def _status(run_dir: Path, state: str, message: str = "", **extra) -> None:
@@ -66,12 +50,26 @@ def _fingerprint(scene_path) -> str:
     return scene_fingerprint(scene_path)
 
 
+def _device(cfg: dict) -> str:
+    """The device training uses, for the memory counters (train.device where the config has it)."""
+    dev = str(cfg.get("train", {}).get("device") or "auto")
+    if dev == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return dev
+
+
 def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: bool = True) -> Path:
-    """Resolve `config` for the scene, train (or resume) and write the run folder; returns run_dir."""
+    """Resolve `config` for the scene, train (or resume) and write the run folder; returns run_dir.
+
+    Holds the folder's writer lock (gsbench.runlock) throughout: a second writer is refused."""
+    run_dir = Path(run_dir)
+    with RunLock(run_dir):
+        return _train_run(config, Path(scene_path), run_dir, progress)
+
+
+def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) -> Path:
     from gsbench.methods import get_method
 
-    run_dir = Path(run_dir)
-    scene_path = Path(scene_path)
     fp = _fingerprint(scene_path)
     rid = run_id(config, fp)
     st = read_status(run_dir)
@@ -82,14 +80,14 @@ def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: boo
                              f"use a new --out folder")
     if st is not None and st.get("state") == "done":
         if progress:
-            print(f"gsbench train: {run_dir} is already done (run {rid}); not retrained")
+            log.warning("gsbench train: %s is already done (run %s); not retrained", run_dir, rid)
         return run_dir
     scene = _load_scene(scene_path)
     cfg, dropped = resolve_for_scene(config, scene)
     cfg["scene"] = {"path": str(scene_path.resolve()), "name": scene.name, "fingerprint": fp}
     cfg["run_id"] = rid
     for part, why in dropped.items():
-        print(f"gsbench train: dropped {part}: {why}", file=sys.stderr)
+        log.warning("gsbench train: dropped %s: %s", part, why)
     run_dir.mkdir(parents=True, exist_ok=True)
     seed = int(cfg["seed"])
     torch.manual_seed(seed)
@@ -103,10 +101,11 @@ def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: boo
     _status(run_dir, "running", "", train_s_so_far=prev_s)
     method = get_method(cfg["method"])()
     t0 = time.perf_counter()
+    memory = PeakMemory(_device(cfg)).start()
     try:
         method.fit(scene, run_dir, cfg, progress=progress)
     except NonFiniteError as e:
-        _finish(run_dir, method, cfg, "nonfinite", str(e), prev_s + time.perf_counter() - t0)
+        _finish(run_dir, method, cfg, "nonfinite", str(e), prev_s + time.perf_counter() - t0, memory.read())
         raise
     except KeyboardInterrupt:
         _status(run_dir, "failed", "interrupted; re-run to resume from the last checkpoint",
@@ -118,22 +117,25 @@ def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: boo
     finally:
         torch.set_num_threads(threads_before)
     train_s = prev_s + time.perf_counter() - t0
+    peaks = memory.read()
     method.save(run_dir / MODEL)
-    _finish(run_dir, method, cfg, "done", "", train_s)
+    _finish(run_dir, method, cfg, "done", "", train_s, peaks)
     return run_dir
 
 
-def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s: float) -> None:
+def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s: float, peaks: dict) -> None:
     from gsbench.store import read_jsonl
     log = read_jsonl(run_dir / "train_log.jsonl")
     steps = [int(r["step"]) for r in log if "step" in r]
     last_eval = next((r["eval"] for r in reversed(log) if "eval" in r), None)
     n = method.field.num if getattr(method, "field", None) is not None else None
     summary = {"run_id": cfg.get("run_id"), "method": cfg["method"], "status": state, "message": message,
-               "train_s": train_s, "peak_rss_mb": peak_rss_mb(),
+               "train_s": train_s, "peak_rss_mb": peaks["peak_rss_mb"], "rss_source": peaks["rss_source"],
                "iterations": max(steps) if steps else 0, "n_gaussians": n,
                "providers": method.provider_ids(), "dropped": cfg.get("dropped", {}), "backend": method.backend,
                "last_eval": last_eval, "info": getattr(method, "info", {})}
+    if "peak_cuda_mb" in peaks:
+        summary["train_peak_cuda_mb"] = peaks["peak_cuda_mb"]
     write_json_atomic(run_dir / "train_summary.json", summary)
     _status(run_dir, state, message, train_s_so_far=train_s)
 

@@ -23,7 +23,7 @@ def test_preset_then_overrides():
     assert c["train"]["max_width"] is None and c["train"]["background"] == [1, 1, 1]
     assert c["gaussiands"]["losses"]["ds"] is False
     assert c["train"]["densify"]["enabled"] is True                  # untouched keys keep the default
-    assert parse_overrides({"a.b": 1}) == {"a": {"b": 1}}
+    assert parse_overrides({"a": {"b": 1}}) == {"a.b": 1} == parse_overrides(["a.b=1"])
 
 
 @pytest.mark.parametrize("bad", [["train.iteration=5"], ["nokey=1"], ["train.iterations"], ["gaussiands.depth_formulation=foo"],
@@ -96,3 +96,183 @@ def test_resolver_vanilla_twostage_and_formulation_none():
     assert "formulation=none" in dropped["gaussiands.losses.depth"]
     cfg, dropped = resolve_for_scene(load_config("gaussiands", None, ["gaussiands.losses.depth=false", "gaussiands.losses.ds=false"]), _scene())
     assert "nothing uses it" in dropped["priors.depth"]
+
+
+# ---------------------------------------------------------------------------- one override path
+import argparse  # noqa: E402
+
+from gsbench import config_keys  # noqa: E402
+from gsbench.cli import build_parser  # noqa: E402
+from gsbench.commands.ablate import grid_from_args  # noqa: E402
+from gsbench.commands.train import config_from_args  # noqa: E402
+from gsbench.config import default_tree, flatten, load_tree, validate  # noqa: E402
+from gsbench.grids import cell_config, load_grid  # noqa: E402
+
+ONE_CELL_GRID = """study: custom
+base:
+  method: gaussiands
+  preset: cpu-small
+scenes: [tabletop-small]
+seeds: [0]
+"""
+
+
+def _train_args(*argv: str) -> argparse.Namespace:
+    return build_parser().parse_args(["train", "--method", "gaussiands", "--preset", "cpu-small", "--scene", "s",
+                                      "--out", "o", *argv])
+
+
+def _ablate_cell_config(tmp_path, *argv: str) -> dict:
+    g = tmp_path / "one.yaml"
+    g.write_text(ONE_CELL_GRID)
+    args = build_parser().parse_args(["ablate", "--grid", str(g), "--out", str(tmp_path / "runs"), *argv])
+    grid = grid_from_args(args)
+    [cell] = grid.cells()
+    cfg = cell_config(cell, tmp_path / "runs", grid.axis_keys)
+    for k in ("study", "grid"):
+        cfg.pop(k)
+    cfg["priors"]["cache_dir"] = None
+    return cfg
+
+
+@pytest.mark.parametrize("train_argv, ablate_argv", [
+    (["--set", "train.lr.color=1e-4", "--set", "gaussiands.losses.ds=false"],
+     ["--set", "train.lr.color=1e-4", "gaussiands.losses.ds=false"]),
+    (["--set", "train.lr.color=1e-4", "gaussiands.losses.ds=false"],
+     ["--set", "train.lr.color=1e-4", "--set", "gaussiands.losses.ds=false"]),
+])
+def test_train_and_ablate_resolve_the_same_set_list(tmp_path, train_argv, ablate_argv):
+    via_train = config_from_args(_train_args(*train_argv))
+    via_ablate = _ablate_cell_config(tmp_path, *ablate_argv)
+    assert via_train["train"]["lr"]["color"] == 1e-4 and isinstance(via_train["train"]["lr"]["color"], float)
+    assert via_train["gaussiands"]["losses"]["ds"] is False
+    assert via_ablate["seed"] == via_train["seed"] == 0
+    assert via_train == via_ablate
+    # both keys are kept when --set is repeated (ablate used to keep only the last one)
+    assert via_ablate["train"]["lr"]["color"] == 1e-4 and via_ablate["gaussiands"]["losses"]["ds"] is False
+
+
+def test_a_wrong_typed_bool_is_refused_by_train_and_ablate(tmp_path, capsys):
+    from gsbench.cli import main
+    with pytest.raises(InputError, match="gaussiands.losses.depth must be true/false, got 3"):
+        config_from_args(_train_args("--set", "gaussiands.losses.depth=3"))
+    with pytest.raises(InputError, match="gaussiands.losses.depth must be true/false, got 3"):
+        _ablate_cell_config(tmp_path, "--set", "train.iterations=5", "gaussiands.losses.depth=3")
+    g = tmp_path / "one.yaml"
+    assert main(["ablate", "--grid", str(g), "--out", str(tmp_path / "r"), "--dry-run",
+                 "--set", "gaussiands.losses.depth=3"]) == 1
+    assert main(["train", "--method", "vanilla", "--scene", str(tmp_path), "--out", str(tmp_path / "r2"),
+                 "--set", "gaussiands.losses.depth=3"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all("gaussiands.losses.depth must be true/false" in line for line in err)
+
+
+@pytest.mark.parametrize("item, expect", [
+    ("train.lr.position_init=-1", "train.lr.position_init=-1 is out of range: must be > 0"),
+    ("train.lr.color=0", "train.lr.color=0 is out of range: must be > 0"),
+    ("train.lambda_dssim=7", "train.lambda_dssim=7 is out of range: must be in [0, 1]"),
+    ("train.iterations=-5", "train.iterations=-5 is out of range: must be >= 1"),
+    ("train.iterations=0", "train.iterations=0 is out of range: must be >= 1"),
+    ("gaussiands.lambdas.sem=-3", "gaussiands.lambdas.sem=-3 is out of range: must be >= 0"),
+    ("priors.masks.min_iou=1.5", "priors.masks.min_iou=1.5 is out of range: must be in [0, 1]"),
+    ("train.lambda_dssim=.nan", "train.lambda_dssim=nan is out of range"),
+    ("train.lr.color=.inf", "train.lr.color=inf is out of range"),
+    ("backend=vulkan", "backend='vulkan' is out of range: must be one of auto, torch, cpu, gsplat"),
+    ("priors.depth.noise.type=fog", "must be one of null, gaussian, poisson, motion_blur, salt_pepper"),
+    ("train.max_width=0", "train.max_width=0 is out of range: must be >= 1"),
+    ("train.iterations=1.5", "train.iterations must be a whole number"),
+    ("train.iterations=null", "train.iterations cannot be null"),
+    ("gaussiands.latent_dim='3'", "gaussiands.latent_dim must be a number"),
+])
+def test_out_of_range_and_wrong_type_name_key_and_range(item, expect):
+    with pytest.raises(InputError) as e:
+        load_config("gaussiands", None, [item])
+    assert expect in str(e.value)
+
+
+def test_values_inside_the_ranges_are_kept():
+    c = load_config("gaussiands", None, ["train.lambda_dssim=0", "train.lambda_dssim=1", "train.iterations=3e4",
+                                         "gaussiands.lambdas.sem=0", "train.max_width=null", "priors.depth.noise.type=null",
+                                         "gaussiands.lambdas.tv=2"])
+    assert c["train"]["lambda_dssim"] == 1.0 and c["gaussiands"]["lambdas"]["sem"] == 0.0
+    assert c["train"]["iterations"] == 30000 and isinstance(c["train"]["iterations"], int)
+    assert c["gaussiands"]["lambdas"]["tv"] == 2.0 and isinstance(c["gaussiands"]["lambdas"]["tv"], float)
+
+
+def test_unknown_key_suggests_close_matches():
+    with pytest.raises(InputError, match=r"unknown config key 'train.lambda_dsim'.*did you mean train.lambda_dssim"):
+        load_config("gaussiands", None, ["train.lambda_dsim=0.1"])
+    with pytest.raises(InputError, match=r"unknown config key 'train.lr'.*a section.*train.lr.position_init"):
+        load_config("gaussiands", None, ["train.lr=0.1"])
+
+
+def test_grid_yaml_reads_1e4_as_a_number_in_base_axes_and_sweeps(tmp_path):
+    g = tmp_path / "g.yaml"
+    g.write_text("""study: custom
+base:
+  method: gaussiands
+  preset: cpu-small
+  set: {train.lr.color: 1e-4}
+scenes: [tabletop-small]
+seeds: [0]
+axes:
+  train.lr.position_init: [1e-4, 2.0e-4]
+sweeps:
+  - axes: {train.lr.opacity: [5E-2]}
+""")
+    grid = load_grid(g)
+    cells = grid.cells()
+    assert grid.base_set["train.lr.color"] == 1e-4
+    assert sorted(c.overrides.get("train.lr.position_init", 0.0) for c in cells) == [0.0, 1e-4, 2e-4]
+    cfgs = [cell_config(c, tmp_path, grid.axis_keys) for c in cells]
+    assert all(isinstance(c["train"]["lr"]["color"], float) and c["train"]["lr"]["color"] == 1e-4 for c in cfgs)
+    assert {c["grid"]["train.lr.opacity"] for c in cfgs} == {0.05}
+    g.write_text(g.read_text().replace("[5E-2]", "['5E-2']"))      # a quoted number stays a string: refused
+    with pytest.raises(InputError, match="train.lr.opacity must be a number"):
+        load_grid(g)
+
+
+def test_a_preset_file_works_in_train_and_as_a_grid_base_preset(tmp_path):
+    (tmp_path / "mine.yaml").write_text("train:\n  iterations: 42\n  lr:\n    color: 3e-3\n")
+    c = config_from_args(build_parser().parse_args(["train", "--method", "vanilla", "--scene", "s", "--out", "o",
+                                                    "--preset", str(tmp_path / "mine.yaml")]))
+    assert c["train"]["iterations"] == 42 and c["train"]["lr"]["color"] == 3e-3
+    (tmp_path / "g.yaml").write_text(ONE_CELL_GRID.replace("preset: cpu-small", "preset: mine.yaml"))
+    grid = load_grid(tmp_path / "g.yaml")          # relative to the grid file
+    [cell] = grid.cells()
+    cfg = cell_config(cell, tmp_path, grid.axis_keys)
+    assert cfg["train"]["iterations"] == 42 and cfg["train"]["lr"]["color"] == 3e-3
+    (tmp_path / "bad.yaml").write_text("train:\n  lambda_dssim: 2\n")
+    with pytest.raises(InputError, match=r"bad.yaml: train.lambda_dssim=2 is out of range"):
+        load_config("vanilla", str(tmp_path / "bad.yaml"))
+
+
+def test_every_rule_names_a_key_of_default_yaml_and_shipped_configs_pass():
+    leaves = flatten(default_tree())
+    assert set(config_keys.RULES) <= set(leaves)
+    validate(default_tree())
+    for preset in ("cpu-small", "paper"):
+        for m in config_keys.METHODS:
+            validate(load_config(m, preset))
+    assert load_tree("cpu-small")["train"]["iterations"] == 500
+
+
+def test_declared_choices_agree_with_the_code_that_consumes_them():
+    from gsbench.datasets.noise import NOISE_KINDS, SEVERITIES
+    from gsbench.evaluate import PROTOCOLS
+    from gsbench.methods.losses import DEPTH_FORMULATIONS
+    from gsbench.priors.depth import DEPTH_PROVIDERS
+    from gsbench.priors.features import FEATURE_PROVIDERS
+    from gsbench.priors.ordering import ORDERINGS
+    from gsbench.priors.pipeline import MASK_PROVIDERS, PROPAGATORS
+    from gsbench.render import BACKENDS
+    assert set(config_keys.BACKENDS) == {"auto", *BACKENDS}
+    assert set(config_keys.DEPTH_FORMULATIONS) == set(DEPTH_FORMULATIONS)
+    assert set(config_keys.DEPTH_PROVIDERS) == set(DEPTH_PROVIDERS)
+    assert set(config_keys.MASK_PROVIDERS) == set(MASK_PROVIDERS)
+    assert set(config_keys.FEATURE_PROVIDERS) == set(FEATURE_PROVIDERS)
+    assert set(config_keys.PROPAGATORS) == set(PROPAGATORS)
+    assert set(config_keys.ORDERINGS) == set(ORDERINGS)
+    assert set(config_keys.NOISE_TYPES) == {None, *NOISE_KINDS}
+    assert set(config_keys.NOISE_SEVERITIES) == set(SEVERITIES)
+    assert set(config_keys.PROTOCOLS) == set(PROTOCOLS)

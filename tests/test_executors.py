@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from gsbench.executors import LocalExecutor, SubmititExecutor, apply_thread_budget, make_executor
+from gsbench.grids.executors import LocalExecutor, SubmititExecutor, apply_thread_budget, make_executor
 
 
 def worker_info(x: int) -> tuple[int, str, str, int]:

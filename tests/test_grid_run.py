@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from gsbench import grids
-from gsbench.executors import SerialExecutor
+from gsbench.grids.executors import SerialExecutor
 from gsbench.store import read_json, write_json_atomic
 
 @pytest.fixture
@@ -52,7 +52,7 @@ def test_skip_failed_retry_and_stale(tmp_path, monkeypatch):
             raise RuntimeError("simulated failure")
         write_json_atomic(run_dir / "results.json", {"metrics": {}})
 
-    monkeypatch.setattr(grids, "_train_and_evaluate", fake)
+    monkeypatch.setattr(grids.running, "_train_and_evaluate", fake)
     grid = grids.load_grid(_write_grid(tmp_path / "g.yaml"))
     out = tmp_path / "runs"
     planned = grids.plan(grid, out)

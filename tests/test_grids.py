@@ -88,7 +88,7 @@ def test_validation_errors():
         _grid(axes={"gaussiands.latent_dim": []})
     with pytest.raises(InputError, match="unknown top-level keys"):
         _grid(axis={"gaussiands.latent_dim": [3]})
-    with pytest.raises(InputError, match="unknown config preset"):
+    with pytest.raises(InputError, match="base.preset: unknown preset"):
         _grid(base={"preset": "gpu-huge"})
     with pytest.raises(InputError, match="study 'latent_dim' varies"):
         _grid(study="latent_dim", axes={"gaussiands.losses.ds": [True, False]})
@@ -184,7 +184,8 @@ def test_failed_cell_writes_failed_results_and_stays_failed(tmp_path, monkeypatc
     def boom(spec, run_dir, status):
         raise RuntimeError("simulated crash")
 
-    monkeypatch.setattr(grids, "_train_and_evaluate", boom)
+    from gsbench.grids import running
+    monkeypatch.setattr(running, "_train_and_evaluate", boom)
     run_dir = tmp_path / "runs" / "abc123"
     spec = {"run_dir": str(run_dir), "scene_path": str(tmp_path / "no-such-scene"), "study": "custom",
             "axes": {"train.lambda_dssim": 0.2}, "scene": {"path": "x"}, "seed": 3, "method": "vanilla",

@@ -179,3 +179,42 @@ def test_nonfinite_at_the_first_step_is_a_clear_status(workspace, poison, expect
     st = read_json(run / "status.json")
     assert st["state"] == "nonfinite" and expect in st["message"]
     assert not (run / "model.pt").exists() and not (run / "checkpoint.pt").exists()
+
+
+@pytest.mark.slow
+def test_a_second_train_into_a_running_folder_is_refused_and_a_sigkilled_holder_is_taken_over(workspace, tmp_path):
+    """One writer per run folder: while a `gsbench train` writes a folder, the same command into it exits 1
+    with one line naming the holder (and writes nothing); after a SIGKILL of the holder the next run takes
+    the lock over and finishes the run."""
+    run = tmp_path / "run"
+    cmd = train_cmd(workspace / "scene", run, f"train.iterations={ITERS}", f"train.checkpoint_every={CKPT_EVERY}",
+                    f"train.log_every={LOG_EVERY}")
+    log = tmp_path / "first.log"
+    with open(log, "w") as f:
+        first = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        t0 = time.time()
+        while checkpoint_step(run) < 0:
+            assert first.poll() is None, log.read_text()[-2000:]
+            assert time.time() - t0 < 600, "no checkpoint within the time limit"
+            time.sleep(0.1)
+        os.killpg(first.pid, signal.SIGSTOP)          # keep it mid-run (alive) while the second one starts
+        log_lines = (run / "train_log.jsonl").read_text().count("\n")
+        second = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+        assert second.returncode == 1, second.stderr
+        err = second.stderr.strip().splitlines()
+        assert len(err) == 1 and "another process is writing this run folder" in err[0], second.stderr
+        assert f"pid {first.pid} on " in err[0] and "gsbench train" in err[0]
+        assert (run / "train_log.jsonl").read_text().count("\n") == log_lines      # the second wrote nothing
+        os.killpg(first.pid, signal.SIGKILL)
+        first.wait(timeout=60)
+    finally:
+        if first.poll() is None:
+            os.killpg(first.pid, signal.SIGKILL)
+            first.wait()
+    assert json.loads((run / "writer.lock").read_text())["pid"] == first.pid      # left behind by the kill
+    third = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    assert third.returncode == 0, third.stderr[-2000:]
+    assert "took over the lock of a stale writer" in third.stderr and f"pid {first.pid}" in third.stderr
+    assert read_json(run / "status.json")["state"] == "done"
+    assert not (run / "writer.lock").exists()

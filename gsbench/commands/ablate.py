@@ -15,8 +15,9 @@ from gsbench.errors import InputError
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--grid", help="a shipped grid name (see --list) or a grid YAML file")
     parser.add_argument("--out", type=Path, help="RUNS_DIR: one run folder per cell, shared scenes and priors cache")
-    parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
-                        help="override config keys in every cell (e.g. train.iterations=30); may not be a grid axis")
+    parser.add_argument("--set", dest="overrides", nargs="+", action="append", default=[], metavar="KEY=VALUE",
+                        help="override config keys in every cell (e.g. train.iterations=30; repeatable); "
+                        "may not be a grid axis")
     parser.add_argument("--executor", choices=["local", "submitit", "serial"], default="local",
                         help="local = process pool (--jobs), submitit = SLURM job arrays (--cluster), "
                         "serial = this process, one cell after another (debugging)")
@@ -37,6 +38,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true")
 
 
+def grid_from_args(args: argparse.Namespace):
+    """The grid this command runs: the grid file with every --set applied to its base (None without --grid)."""
+    from gsbench import grids
+    from gsbench.config import parse_overrides, set_args
+    extra = parse_overrides(set_args(args.overrides))
+    if not args.grid:
+        if extra:
+            raise InputError("--set applies to the cells of a grid: give --grid too")
+        return None
+    return grids.load_grid(args.grid, extra_set=extra)
+
+
 def run(args: argparse.Namespace) -> int:
     from gsbench import grids
     if args.list:
@@ -46,23 +59,21 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.out is None:
         raise InputError("--out RUNS_DIR is required")
-    extra = grids.parse_set(args.set)
+    grid = grid_from_args(args)
     if args.status:
-        grid = grids.load_grid(args.grid, extra_set=extra) if args.grid else None
         if not args.out.is_dir():
             raise InputError(f"{args.out}: runs folder not found")
         rows = grids.status_rows(args.out, grid)
         print(grids.format_status(rows))
         return 0
-    if not args.grid:
+    if grid is None:
         raise InputError("--grid is required (a shipped name or a YAML file; --list shows the shipped ones)")
-    grid = grids.load_grid(args.grid, extra_set=extra)
     if args.dry_run:
         for c in grid.cells():
             print(f"{c.method:10s} {c.scene.label:24s} seed={c.seed} " + " ".join(f"{k}={v}" for k, v in c.axes.items()))
         print(f"{len(grid.cells())} cells")
         return 0
-    from gsbench.executors import make_executor
+    from gsbench.grids.executors import make_executor
     slurm = {"slurm_partition": args.slurm_partition, "timeout_min": args.timeout_min,
              "cpus_per_task": args.cpus_per_task, "gpus_per_node": args.gpus_per_node}
     if args.cluster != "slurm":
@@ -72,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     from concurrent.futures.process import BrokenProcessPool
     try:
         report = grids.run_grid(grid, args.out, executor, retry_failed=args.retry_failed,
-                                share_priors=not args.no_shared_priors)
+                                share_priors=not args.no_shared_priors, log=print)
     except BrokenProcessPool as e:
         print(f"gsbench ablate: a worker process died ({e}); finished cells are saved, re-run to resume "
               "the others (see --status)", file=sys.stderr)

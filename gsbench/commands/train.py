@@ -4,25 +4,31 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gsbench.methods.registry import METHODS
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from gsbench.methods.registry import METHODS
     parser.add_argument("--method", required=True, choices=METHODS,
                         help="method to train")
     parser.add_argument("--scene", required=True, help="scene folder (any layout gsbench.datasets reads)")
     parser.add_argument("--preset", default=None, help="config preset: cpu-small, paper, or a .yaml path")
-    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help="override one config key, e.g. --set train.iterations=300 (repeatable)")
+    parser.add_argument("--set", dest="overrides", nargs="+", action="append", default=[], metavar="KEY=VALUE",
+                        help="override config keys, e.g. --set train.iterations=300 (repeatable)")
     parser.add_argument("--out", required=True, help="run folder to write (resumed if it holds a checkpoint)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
+def config_from_args(args: argparse.Namespace) -> dict:
+    """The config this command trains with (default <- --preset <- every --set)."""
+    from gsbench.config import load_config, set_args
+    return load_config(args.method, args.preset, set_args(args.overrides))
+
+
 def run(args: argparse.Namespace) -> int:
-    from gsbench.config import load_config
     from gsbench.runs import train_run
     from gsbench.store import read_json
 
-    cfg = load_config(args.method, args.preset, args.overrides)
+    cfg = config_from_args(args)
     out = train_run(cfg, Path(args.scene), Path(args.out), progress=not args.no_progress)
     s = read_json(out / "train_summary.json")
     ev = s.get("last_eval") or {}

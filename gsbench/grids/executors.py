@@ -2,9 +2,11 @@
 
 The grid code only calls `executor.map(fn, items)`; it does not know which executor runs it.
 
-- `LocalExecutor(jobs)`: a process pool (spawn context: no forked torch/OpenMP state), one cell
-  per worker; each worker uses max(1, cores // jobs) torch threads so `--jobs N` never
-  oversubscribes the machine. On a CUDA machine, worker k is pinned to GPU k % n_gpus.
+- `LocalExecutor(jobs)`: a process pool (spawn context: no forked torch/OpenMP state) that starts a
+  fresh worker process for every cell (max_tasks_per_child=1), so no cell inherits the memory peak,
+  caches or torch state of an earlier one; each worker uses max(1, cores // jobs) torch threads so
+  `--jobs N` never oversubscribes the machine. On a CUDA machine each worker takes a GPU from a pool
+  of `jobs` slots (slot k on GPU k % n_gpus) and gives it back when it exits.
 - `SerialExecutor()`: in this process, one cell after another (debugging).
 - `SubmititExecutor(folder, cluster)`: submitit job arrays (`map_array`). cluster="slurm" submits
   to SLURM, cluster="local" runs each job as a local subprocess (used in the tests), "debug" runs
@@ -15,6 +17,7 @@ from __future__ import annotations
 import functools
 import os
 import sys
+from multiprocessing import util as mp_util
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 from pathlib import Path
@@ -55,7 +58,10 @@ def _init_worker(threads: int, gpu_queue: Any) -> None:
     os.environ["MKL_NUM_THREADS"] = str(threads)
     os.environ["GSBENCH_THREADS"] = str(threads)
     if gpu_queue is not None:
-        os.environ["CUDA_VISIBLE_DEVICES"] = str(gpu_queue.get())
+        gpu = gpu_queue.get()
+        os.environ["CUDA_VISIBLE_DEVICES"] = str(gpu)
+        # the slot goes back when this one-cell worker exits, for the worker that replaces it
+        mp_util.Finalize(None, gpu_queue.put, args=(gpu,), exitpriority=10)
     if "torch" in sys.modules:
         apply_thread_budget()
 
@@ -94,7 +100,7 @@ class LocalExecutor:
             for k in range(self.jobs):
                 gpu_queue.put(k % n_gpus)
         results: list[Any] = [None] * len(items)
-        with ProcessPoolExecutor(max_workers=min(self.jobs, len(items)), mp_context=ctx,
+        with ProcessPoolExecutor(max_workers=min(self.jobs, len(items)), mp_context=ctx, max_tasks_per_child=1,
                                  initializer=_init_worker, initargs=(self.threads, gpu_queue)) as pool:
             futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
             bar = tqdm(total=len(items), desc=f"cells (local, {self.jobs} jobs)", disable=not self.progress)

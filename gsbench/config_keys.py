@@ -1,0 +1,167 @@
+"""The one declaration of what each config key accepts, beyond the type its default has.
+
+A key's type comes from gsbench/configs/default.yaml (a bool default takes only true/false, a
+number default only numbers, ...). This table adds ranges and choices, and the type of keys whose
+default is null. A key of default.yaml without a rule here is type-checked only. The choices are
+spelled out here (not imported) so that reading a config never imports torch or a model library;
+tests/test_config.py checks that they agree with the code that consumes them.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Optional
+
+from gsbench.methods.registry import METHODS  # live: the registered method names
+
+
+@dataclass(frozen=True)
+class Rule:
+    """Range [low, high] (low excluded when low_open), choices, and the type of a null default."""
+
+    low: Optional[float] = None
+    high: Optional[float] = None
+    low_open: bool = False
+    choices: Optional[tuple] = None
+    kind: Optional[str] = None        # int | float | str | list: for keys whose default is null
+    nullable: bool = False            # null is a valid value (keys with a null default always are)
+    integer: bool = False             # a number that must be whole (an int default implies it)
+
+    def describe(self) -> str:
+        """The allowed values in words, for error messages and the docs."""
+        if self.choices is not None:
+            return "one of " + ", ".join("null" if c is None else str(c) for c in self.choices)
+        lo = "" if self.low is None else (f"> {self.low:g}" if self.low_open else f">= {self.low:g}")
+        if self.low is not None and self.high is not None and not self.low_open:
+            return f"in [{self.low:g}, {self.high:g}]"
+        hi = "" if self.high is None else f"<= {self.high:g}"
+        return " and ".join(x for x in (lo, hi) if x) or "any value"
+
+    def admits(self, value: Any) -> bool:
+        """True when `value` (already of the right type) is inside the rule."""
+        if value is None:
+            return True
+        if self.choices is not None:
+            return value in self.choices
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            v = float(value)
+            if not math.isfinite(v):
+                return False
+            if self.low is not None and (v <= self.low if self.low_open else v < self.low):
+                return False
+            if self.high is not None and v > self.high:
+                return False
+        return True
+
+
+def positive(**kw: Any) -> Rule:
+    return Rule(low=0.0, low_open=True, **kw)
+
+
+def at_least(x: float, **kw: Any) -> Rule:
+    return Rule(low=x, **kw)
+
+
+def unit(**kw: Any) -> Rule:
+    """A probability or a mixing weight: [0, 1]."""
+    return Rule(low=0.0, high=1.0, **kw)
+
+
+def one_of(*choices: Any, **kw: Any) -> Rule:
+    return Rule(choices=tuple(choices), **kw)
+
+
+BACKENDS = ("auto", "torch", "cpu", "gsplat")
+DEPTH_PROVIDERS = ("gt", "sparse", "depth-anything", "none")
+MASK_PROVIDERS = ("simulated", "sam2", "gt")
+FEATURE_PROVIDERS = ("text-aligned", "openclip")
+PROPAGATORS = ("flow", "reproject")
+ORDERINGS = ("pose", "random", "filename")
+NOISE_TYPES = (None, "gaussian", "poisson", "motion_blur", "salt_pepper")
+NOISE_SEVERITIES = (0, 1, 2, 3, 4, 5)
+DEPTH_FORMULATIONS = ("none", "raw_l1", "minmax", "scale_shift", "pearson")
+INIT_MODES = ("auto", "points", "random")
+QUERY_MODES = ("encode", "decode")
+PROTOCOLS = ("auto", "lerf", "3dovs")
+LPIPS_NETS = ("vgg", "alex")
+
+RULES: dict[str, Rule] = {
+    "method": Rule(choices=METHODS),  # type: ignore[arg-type]
+    "seed": at_least(0, integer=True),
+    "backend": one_of(*BACKENDS),
+    # training schedule
+    "train.iterations": at_least(1),
+    "train.max_width": at_least(1, kind="int", integer=True),
+    "train.sh_degree": Rule(low=0, high=3),
+    "train.lambda_dssim": unit(),
+    "train.init.mode": one_of(*INIT_MODES),
+    "train.init.num_random": at_least(1),
+    "train.init.max_points": at_least(1, kind="int", integer=True),
+    "train.init.random_scale": positive(),
+    "train.lr.position_init": positive(),
+    "train.lr.position_final": positive(),
+    "train.lr.position_delay_mult": positive(),
+    "train.lr.position_delay_steps": at_least(0),
+    "train.lr.position_max_steps": at_least(1),
+    "train.lr.color": positive(),
+    "train.lr.opacity": positive(),
+    "train.lr.scaling": positive(),
+    "train.lr.rotation": positive(),
+    "train.lr.semantic": positive(),
+    "train.densify.from_iter": at_least(0),
+    "train.densify.until_iter": at_least(0),
+    "train.densify.interval": at_least(1),
+    "train.densify.grad_threshold": positive(),
+    "train.densify.percent_dense": positive(),
+    "train.densify.opacity_reset_interval": at_least(1),
+    "train.densify.prune_opacity": unit(),
+    "train.densify.max_screen_size": at_least(0),
+    "train.densify.max_gaussians": at_least(1),
+    "train.eval_every": at_least(0),
+    "train.eval_views": at_least(1),
+    "train.checkpoint_every": at_least(1),
+    "train.log_every": at_least(1),
+    # priors
+    "priors.cache_dir": Rule(kind="str"),
+    "priors.ordering": one_of(*ORDERINGS),
+    "priors.depth.provider": one_of(*DEPTH_PROVIDERS),
+    "priors.depth.model_path": Rule(kind="str"),
+    "priors.depth.noise.type": one_of(*NOISE_TYPES, kind="str"),
+    "priors.depth.noise.severity": one_of(*NOISE_SEVERITIES),
+    "priors.masks.provider": one_of(*MASK_PROVIDERS),
+    "priors.masks.severity": at_least(0),
+    "priors.masks.propagator": one_of(*PROPAGATORS),
+    "priors.masks.checkpoint": Rule(kind="str"),
+    "priors.masks.model_config": Rule(kind="str"),
+    "priors.masks.min_iou": unit(),
+    "priors.features.provider": one_of(*FEATURE_PROVIDERS),
+    "priors.features.checkpoint": Rule(kind="str"),
+    "priors.features.noise": at_least(0),
+    # GaussianDS
+    "gaussiands.latent_dim": at_least(1),
+    "gaussiands.autoencoder.epochs": at_least(0),
+    "gaussiands.autoencoder.lr": positive(),
+    "gaussiands.depth_formulation": one_of(*DEPTH_FORMULATIONS),
+    "gaussiands.lambdas.depth": at_least(0),
+    "gaussiands.lambdas.tv": at_least(0),
+    "gaussiands.lambdas.sem": at_least(0),
+    "gaussiands.lambdas.ds": at_least(0),
+    "gaussiands.tv_eps": positive(),
+    "gaussiands.edges.canny_low": at_least(0),
+    "gaussiands.edges.canny_high": at_least(0),
+    "gaussiands.edges.dilate": at_least(0),
+    "gaussiands.min_valid_pixels": at_least(1),
+    "twostage.semantic_iterations": at_least(0),
+    # queries and evaluation
+    "query.mode": one_of(*QUERY_MODES),
+    "query.threshold": Rule(low=-1.0, high=1.0),
+    "removal.threshold": Rule(low=-1.0, high=1.0),
+    "eval.protocol": one_of(*PROTOCOLS),
+    "eval.lpips_net": one_of(*LPIPS_NETS),
+    "eval.fps_warmup": at_least(0),
+    "eval.fps_repeats": at_least(1),
+    "eval.boundary_dilation_ratio": unit(),
+}
+
+# Leaves whose value is a free-form mapping handed to a library as is (not split into keys).
+FREE_MAPPINGS = ("priors.masks.generator",)

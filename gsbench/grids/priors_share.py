@@ -1,0 +1,74 @@
+"""Shared priors: the priors entry each cell will ask for, and computing the shared ones once."""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+from gsbench.grids.planning import PlannedCell
+
+
+def priors_request(spec: dict) -> Optional[dict]:
+    """What the cell's method will ask gsbench.priors for (mirrors the fit() of each method: vanilla
+    none; twostage per-frame masks + features; gaussiands depth and/or propagated masks + features),
+    or None when it needs no priors. Cells with equal requests share one cache entry."""
+    from gsbench.config import resolve_for_scene
+    from gsbench.datasets import load_scene
+    from gsbench.methods.base import training_size
+    from gsbench.methods.common import uses
+    scene = load_scene(spec["scene_path"])
+    cfg, _ = resolve_for_scene(spec["config"], scene)
+    if cfg["method"] == "vanilla" or not scene.train_ids:
+        return None
+    use = uses(cfg)
+    if cfg["method"] == "twostage":
+        need_depth, need_sem, per_frame = False, use["semantics"], True
+    else:
+        need_depth, need_sem, per_frame = use["depth_prior"], use["semantics"], False
+    if not (need_depth or need_sem):
+        return None
+    w, h = training_size(scene.cameras[scene.train_ids[0]], cfg["train"].get("max_width"))
+    return {"scene_path": spec["scene_path"], "priors": cfg["priors"], "view_ids": sorted(scene.train_ids),
+            "size": [w, h], "need_depth": need_depth, "need_sem": need_sem, "per_frame": per_frame,
+            "seed": int(cfg["seed"])}
+
+
+def prepare_priors_job(request: dict) -> dict:
+    """Compute one shared priors entry into the cache (run through the executor before the cells)."""
+    t0 = time.time()
+    try:
+        from gsbench.datasets import load_scene
+        from gsbench.grids.executors import apply_thread_budget
+        from gsbench.priors import prepare_priors
+        apply_thread_budget()
+        scene = load_scene(request["scene_path"])
+        pri = prepare_priors(scene, request["priors"], request["view_ids"], tuple(request["size"]),
+                             Path(request["priors"]["cache_dir"]), need_depth=request["need_depth"],
+                             need_masks=request["need_sem"], need_features=request["need_sem"],
+                             per_frame_masks=request["per_frame"], seed=request["seed"], progress=False)
+        return {"ok": True, "seconds": time.time() - t0, "providers": dict(pri.providers)}
+    except Exception as e:  # the cells then compute their own priors; the grid says so
+        return {"ok": False, "seconds": time.time() - t0, "error": f"{type(e).__name__}: {e}"}
+
+
+def shared_priors(todo: list[PlannedCell], executor: Any, log: Callable[[str], None]) -> dict:
+    """Compute each priors entry that two or more pending cells share, once, before the cells run
+    (so parallel cells never compute the same entry side by side)."""
+    groups: dict[str, list[dict]] = {}
+    for pc in todo:
+        req = priors_request(pc.spec())
+        if req is not None:
+            groups.setdefault(json.dumps(req, sort_keys=True, default=str), []).append(req)
+    shared = [reqs[0] for reqs in groups.values() if len(reqs) > 1]
+    if not shared:
+        return {"groups": 0}
+    t0 = time.time()
+    out = list(executor.map(prepare_priors_job, shared))
+    bad = [r["error"] for r in out if not r["ok"]]
+    log(f"shared priors: {len(shared)} entr{'y' if len(shared) == 1 else 'ies'} for "
+        f"{sum(len(v) for v in groups.values() if len(v) > 1)} cells in {time.time() - t0:.1f} s"
+        + (f"; {len(bad)} failed, those cells compute their own: {bad}" if bad else ""))
+    return {"groups": len(shared), "seconds": time.time() - t0, "failed": bad}
+
+
