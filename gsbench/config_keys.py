@@ -84,6 +84,10 @@ INIT_MODES = ("auto", "points", "random")
 QUERY_MODES = ("encode", "decode")
 PROTOCOLS = ("auto", "lerf", "3dovs")
 LPIPS_NETS = ("vgg", "alex")
+LPIPS_INPUTS = ("lpips-[-1,1]", "3dgs-[0,1]")
+HOLDOUTS = ("every-8", "none")
+EVAL_RESOLUTIONS = ("reference", "train")
+LERF_KERNEL_MODES = ("auto", "reference")
 
 RULES: dict[str, Rule] = {
     "method": Rule(choices=METHODS),  # type: ignore[arg-type]
@@ -91,6 +95,7 @@ RULES: dict[str, Rule] = {
     "backend": one_of(*BACKENDS),
     # training schedule
     "train.iterations": at_least(1),
+    "train.holdout": one_of(*HOLDOUTS),
     "train.max_width": at_least(1, kind="int", integer=True),
     "train.sh_degree": Rule(low=0, high=3),
     "train.lambda_dssim": unit(),
@@ -154,10 +159,13 @@ RULES: dict[str, Rule] = {
     "twostage.semantic_iterations": at_least(0),
     # queries and evaluation
     "query.mode": one_of(*QUERY_MODES),
-    "query.threshold": Rule(low=-1.0, high=1.0),
     "removal.threshold": Rule(low=-1.0, high=1.0),
     "eval.protocol": one_of(*PROTOCOLS),
     "eval.lpips_net": one_of(*LPIPS_NETS),
+    "eval.lpips_input": one_of(*LPIPS_INPUTS),
+    "eval.resolution": one_of(*EVAL_RESOLUTIONS),
+    "eval.ovs3d_downsample": at_least(1, integer=True),
+    "eval.lerf_kernels": one_of(*LERF_KERNEL_MODES),
     "eval.fps_warmup": at_least(0),
     "eval.fps_repeats": at_least(1),
     "eval.boundary_dilation_ratio": unit(),

@@ -33,7 +33,6 @@ from typing import Any
 import numpy as np
 
 from gsbench.errors import InputError
-from gsbench.results import RESULTS_VERSION  # noqa: E402,F401  (grids reads it here until it uses gsbench.results)
 
 
 def _json_default(o: Any):

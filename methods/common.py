@@ -50,7 +50,7 @@ def fit_priors(scene, config: dict, run_dir: Path, *, progress: bool):
 
 def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Callable[[GaussianField], dict]]:
     """Periodic segmentation mIoU of a semantic method on the eval views (training resolution), with
-    gsbench.evaluate's code in the configured query mode: {"miou_3dovs": .., "miou_lerf": ..} for the
+    gsbench.evaluation's code in the configured query mode: {"miou_3dovs": .., "miou_lerf": ..} for the
     protocols the scene supports. Returns {} while the field has no latents or the method no
     autoencoder yet (e.g. twostage's rgb phase); None when the scene has no segmentation GT at all."""
     if method is None or not views.eval_cameras or not (scene.has_semantics or scene.has_labels):

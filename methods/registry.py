@@ -180,13 +180,15 @@ def build_priors_request(config: dict, scene) -> Optional[dict]:
         from gsbench.datasets import load_scene
         scene = load_scene(scene)
     cfg, _ = resolve_for_scene(config, scene)
-    if not scene.train_ids:
+    from gsbench.datasets.splits import split_ids
+    train_ids, _ = split_ids(scene, cfg)   # the views fit() trains on (train.holdout)
+    if not train_ids:
         return None
     spec = get_spec(cfg["method"])
     use = spec.uses(cfg)
     from gsbench.methods.base import training_size
-    w, h = training_size(scene.cameras[scene.train_ids[0]], cfg["train"].get("max_width"))
-    return {"scene_path": str(scene.path), "priors": cfg["priors"], "view_ids": sorted(scene.train_ids),
+    w, h = training_size(scene.cameras[train_ids[0]], cfg["train"].get("max_width"))
+    return {"scene_path": str(scene.path), "priors": cfg["priors"], "view_ids": sorted(train_ids),
             "size": [w, h], "need_depth": bool(use["depth_prior"]), "need_sem": bool(use["semantics"]),
             "per_frame": bool(spec.per_frame_masks), "seed": int(cfg["seed"])}
 

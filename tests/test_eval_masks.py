@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gsbench.errors import InputError
-from gsbench.evaluate import score_mask_folder
+from gsbench.evaluation import score_mask_folder
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 LERF_DIR = SHARED / "lerf_ovs_labels" / "waldo_kitchen"

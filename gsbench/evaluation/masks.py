@@ -31,7 +31,8 @@ def score_mask_folder(pred_dir: str | os.PathLike, layout_dir: str | os.PathLike
                       out_dir: Optional[str | os.PathLike] = None, dilation_ratio: float = 0.02) -> dict:
     """Score predicted masks against a LERF-OVS label folder or a 3D-OVS scene; writes
     out_dir/results.json (default: pred_dir/results.json)."""
-    from gsbench.runs import env_info, peak_rss_mb
+    from gsbench.environment import PeakMemory, env_info
+    peaks = PeakMemory().start()
     pred_dir, layout_dir = Path(pred_dir), Path(layout_dir)
     if not pred_dir.is_dir():
         raise InputError(f"{pred_dir}: prediction folder not found")
@@ -49,7 +50,7 @@ def score_mask_folder(pred_dir: str | os.PathLike, layout_dir: str | os.PathLike
     res = run_results(identity=identity, metrics=block.metrics, metric_impl=block.metric_impl,
                       skipped=block.skipped, per_view=block.per_view, view_names=extra.pop("view_names"),
                       frames=block.frames, frames_skipped={}, resolution=block.resolution, notes=block.notes,
-                      timings={"eval_s": time.time() - t0}, memory={"peak_rss_mb": peak_rss_mb()},
+                      timings={"eval_s": time.time() - t0}, memory=peaks.read(),
                       machine=env_info(), predictions=str(pred_dir), missing_policy=MISSING_POLICY, **extra)
     out = Path(out_dir) if out_dir is not None else pred_dir
     write_results(out, res)

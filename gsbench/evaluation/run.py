@@ -53,18 +53,16 @@ def _unscored(scene, fs, protocols: list[str], sets: dict) -> dict:
     return out
 
 
-def _memory(summary: dict) -> dict:
-    import torch
-
-    from gsbench.runs import peak_rss_mb
-    memory = {"peak_rss_mb": peak_rss_mb()}
+def _memory(summary: dict, eval_peaks: dict) -> dict:
+    """This evaluation's peaks (counters reset at its start) beside the training peaks of train_summary.json."""
+    memory = {"peak_rss_mb": eval_peaks["peak_rss_mb"], "rss_source": eval_peaks["rss_source"]}
+    if "peak_cuda_mb" in eval_peaks:
+        memory["eval_peak_cuda_mb"] = eval_peaks["peak_cuda_mb"]
     if "peak_rss_mb" in summary:
         memory["train_peak_rss_mb"] = summary["peak_rss_mb"]
-    for k in ("peak_cuda_mb", "train_peak_cuda_mb"):
-        if k in summary:
-            memory[k] = summary[k]
-    if torch.cuda.is_available():
-        memory["eval_peak_cuda_mb"] = torch.cuda.max_memory_allocated() / 2**20
+        memory["train_rss_source"] = summary.get("rss_source")
+    if "train_peak_cuda_mb" in summary:
+        memory["train_peak_cuda_mb"] = summary["train_peak_cuda_mb"]
     return memory
 
 
@@ -74,14 +72,21 @@ def requested_protocol(protocol: Optional[str], config: dict) -> str:
 
 
 def evaluate_run(run_dir: str | os.PathLike, protocol: Optional[str] = None, progress: bool = True) -> dict:
-    """Evaluate a trained run and write run_dir/results.json (schema: gsbench.results).
-    protocol None = the run config's eval.protocol."""
+    """Evaluate a trained run and write run_dir/results.json (schema: gsbench.results), holding the
+    run folder's writer lock. protocol None = the run config's eval.protocol."""
+    from gsbench.runlock import RunLock
+    with RunLock(Path(run_dir), command="gsbench eval"):
+        return _evaluate_run(Path(run_dir), protocol, progress)
+
+
+def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dict:
     import torch
 
-    from gsbench.runs import env_info, load_run
-    run_dir = Path(run_dir)
+    from gsbench.environment import PeakMemory, env_info
+    from gsbench.runs import load_run
     t_start = time.time()
     method, config, scene = load_run(run_dir)
+    peaks = PeakMemory(getattr(method, "device", None)).start()
     protocol = requested_protocol(protocol, config)
     mode = query_mode(config)
     fs = frame_sets(scene, config)
@@ -124,7 +129,7 @@ def evaluate_run(run_dir: str | os.PathLike, protocol: Optional[str] = None, pro
                           skipped=out.skipped, per_view=out.per_view,
                           view_names=out.frames.get("reconstruction", []), frames=out.frames,
                           frames_skipped=frames_skipped, resolution=out.resolution, notes=out.notes,
-                          timings=out.timings, memory=_memory(summary), machine=env_info(),
+                          timings=out.timings, memory=_memory(summary, peaks.read()), machine=env_info(),
                           status=state if state in ("done", "failed", "nonfinite") else "done")
     write_json_atomic(run_dir / "results.json", results)
     return results

@@ -26,7 +26,7 @@ Cell execution state lives in RUNS_DIR/<run_id>/cell_status.json (the run's own 
 to training): state pending|running|done|failed, pid, host, heartbeat (unix seconds) for stale
 detection, attempt count, error and traceback. A cell is done when that file says done and
 results.json exists and is not a failure record: a failed cell also gets a results.json with status
-"failed", null metrics and the error in `skipped["run"]` (so reports show "n/a (run failed)" instead
+"failed", null metrics and the error as each metric's reason in `skipped` (so reports show "n/a (run failed)" instead
 of "no run"); it stays failed on a re-run and `--retry-failed` runs it again.
 
 Modules, one job each: spec (grid files -> Grid, cells), planning (scenes, cell configs, run ids,
@@ -34,7 +34,7 @@ manifest), liveness (cell_status.json, pid and heartbeat checks), running (a cel
 priors_share (priors shared by several cells), failed (results.json of a failed cell), status
 (the status table), executors (local pool, serial, submitit).
 """
-from gsbench.grids.failed import FAILED_METRICS, write_failed_results
+from gsbench.grids.failed import write_failed_results
 from gsbench.grids.liveness import (CELL_FILE, CELL_STATUS_FILE, HEARTBEAT_S, STALE_AFTER_S, cell_state,
                                     pid_alive, read_cell_status, results_finished)
 from gsbench.grids.planning import (CACHE_DIRNAME, SCENES_DIRNAME, PlannedCell, cell_config, plan,
@@ -46,7 +46,7 @@ from gsbench.grids.spec import (GRID_DIR, STUDIES, Cell, Grid, SceneSpec, find_g
 from gsbench.grids.status import format_status, planned_rows, status_rows
 from gsbench.store import read_json
 
-__all__ = ["FAILED_METRICS", "write_failed_results", "CELL_FILE", "CELL_STATUS_FILE", "HEARTBEAT_S",
+__all__ = ["write_failed_results", "CELL_FILE", "CELL_STATUS_FILE", "HEARTBEAT_S",
            "STALE_AFTER_S", "cell_state", "pid_alive", "read_cell_status", "results_finished", "CACHE_DIRNAME",
            "SCENES_DIRNAME", "PlannedCell", "cell_config", "plan", "resolve_scene", "write_manifest",
            "prepare_priors_job", "priors_request", "shared_priors", "GridReport", "classify", "run_cell",

@@ -5,17 +5,13 @@ from pathlib import Path
 
 from gsbench.store import read_json, write_json_atomic
 
-FAILED_METRICS = ("psnr", "ssim", "lpips", "fps", "miou_3dovs", "mbiou_3dovs", "pixel_acc_3dovs",
-                  "miou_lerf", "loc_acc_lerf", "removal_residual", "removal_psnr_outside",
-                  "ordering_adjacent_distance", "ordering_adjacent_mask_iou")
-
 
 def write_failed_results(spec: dict, run_dir: Path, status: dict) -> dict:
-    """results.json of a failed cell (schema: gsbench.store): status "failed", every metric null and
-    the error in skipped["run"]. Identity fields come from the run's config.json when training got
-    that far (the resolved config), else from the cell's config."""
+    """results.json of a failed cell (schema and builder: gsbench.results): status "failed", every
+    metric null with the error as its reason. Identity fields come from the run's config.json when
+    training got that far (the resolved config), else from the cell's config."""
     from gsbench.environment import env_info
-    from gsbench.store import RESULTS_VERSION
+    from gsbench.results import failed_results
     cfg_path = run_dir / "config.json"
     config = spec.get("config") or {}
     try:
@@ -26,25 +22,22 @@ def write_failed_results(spec: dict, run_dir: Path, status: dict) -> dict:
     scene_name, protocols = None, []
     try:   # name and protocols as evaluate_run would record them, so the failed cell shares their columns
         from gsbench.datasets import load_scene
-        from gsbench.evaluate import resolve_protocols
+        from gsbench.evaluation import resolve_protocols
         scene = load_scene(spec["scene_path"])
         scene_name = scene.name or Path(scene.path).name
         protocols, _ = resolve_protocols(scene, "auto")
     except Exception:  # the scene itself may be what failed; its folder name identifies it
         pass
-    scene_name = scene_name or Path(str(spec.get("scene_path"))).name
-    reason = f"run failed (attempt {status.get('attempt')}): {status.get('error', 'unknown error')}"
-    results = {
-        "results_version": RESULTS_VERSION, "run_id": run_dir.name, "method": config.get("method", spec.get("method")),
-        "scene": scene_name, "scene_path": str(spec.get("scene_path")), "seed": config.get("seed", spec.get("seed")),
-        "study": config.get("study", spec.get("study")), "grid": config.get("grid") or {}, "config": config,
-        "providers": {"depth": None, "masks": None, "features": None}, "backend": None,
-        "protocol": protocols[0] if protocols else None, "protocols": protocols, "metric_impl": {},
-        "metrics": {m: None for m in FAILED_METRICS}, "per_view": {}, "view_names": [],
-        "skipped": {"run": reason}, "timings": {"train_s": None, "eval_s": None, "cell_wall_s": status.get("wall_s")},
-        "memory": {}, "machine": env_info(), "status": "failed", "dropped": config.get("dropped", {}),
+    identity = {
+        "run_id": run_dir.name, "method": config.get("method", spec.get("method")),
+        "scene": scene_name or Path(str(spec.get("scene_path"))).name, "scene_path": str(spec.get("scene_path")),
+        "seed": config.get("seed", spec.get("seed")), "study": config.get("study", spec.get("study")),
+        "grid": config.get("grid") or {}, "config": config,
+        "protocol": protocols[0] if protocols else None, "protocols": protocols,
+        "dropped": config.get("dropped", {}),
     }
+    reason = f"run failed (attempt {status.get('attempt')}): {status.get('error', 'unknown error')}"
+    results = failed_results(identity=identity, reason=reason, machine=env_info(),
+                             timings={"train_s": None, "eval_s": None, "cell_wall_s": status.get("wall_s")})
     write_json_atomic(run_dir / "results.json", results)
     return results
-
-

@@ -10,28 +10,10 @@ from gsbench.grids.planning import PlannedCell
 
 
 def priors_request(spec: dict) -> Optional[dict]:
-    """What the cell's method will ask gsbench.priors for (mirrors the fit() of each method: vanilla
-    none; twostage per-frame masks + features; gaussiands depth and/or propagated masks + features),
-    or None when it needs no priors. Cells with equal requests share one cache entry."""
-    from gsbench.config import resolve_for_scene
-    from gsbench.datasets import load_scene
-    from gsbench.methods.base import training_size
-    from gsbench.methods.common import uses
-    scene = load_scene(spec["scene_path"])
-    cfg, _ = resolve_for_scene(spec["config"], scene)
-    if cfg["method"] == "vanilla" or not scene.train_ids:
-        return None
-    use = uses(cfg)
-    if cfg["method"] == "twostage":
-        need_depth, need_sem, per_frame = False, use["semantics"], True
-    else:
-        need_depth, need_sem, per_frame = use["depth_prior"], use["semantics"], False
-    if not (need_depth or need_sem):
-        return None
-    w, h = training_size(scene.cameras[scene.train_ids[0]], cfg["train"].get("max_width"))
-    return {"scene_path": spec["scene_path"], "priors": cfg["priors"], "view_ids": sorted(scene.train_ids),
-            "size": [w, h], "need_depth": need_depth, "need_sem": need_sem, "per_frame": per_frame,
-            "seed": int(cfg["seed"])}
+    """The priors entry the cell's method will ask for (the method registry builds the same request
+    that fit() uses), or None when it needs no priors. Cells with equal requests share one cache entry."""
+    from gsbench.methods.registry import priors_request as method_priors_request
+    return method_priors_request(spec["config"], spec["scene_path"])
 
 
 def prepare_priors_job(request: dict) -> dict:

@@ -91,7 +91,7 @@ def _run_cell_locked(spec: dict, run_dir: Path) -> dict:
 
 
 def _train_and_evaluate(spec: dict, run_dir: Path, status: dict) -> None:
-    from gsbench.evaluate import evaluate_run
+    from gsbench.evaluation import evaluate_run
     from gsbench.grids.executors import apply_thread_budget
     status["torch_threads"] = apply_thread_budget()
     from gsbench.runs import train_run
