@@ -10,7 +10,7 @@
   monocular estimators do: a low-frequency per-view multiplicative warp of the disparity,
   exp(DIST_PER_SEVERITY * severity * f) with f a smooth unit-std field (a DIST_GRID random grid
   upsampled bicubically), and extra edge smearing (blur sigma grows by SMEAR_PER_SEVERITY of the
-  diagonal per severity). Severity 0 is the plain scale-shift model.
+  diagonal per severity, at most one diagonal). Severity 0 is the plain scale-shift model.
   Kind ``disparity``; valid where the GT depth is.
 - ``sparse``: the scene's sparse points projected into each view with a z-buffer (nearest point
   per pixel). Kind ``depth``; valid only at pixels a point lands on. There are no per-point
@@ -95,7 +95,7 @@ def gt_disparity_prior(depth: np.ndarray, rng: np.random.Generator, distortion: 
     disp /= med if med > 0 else 1.0
     H, Wd = z.shape
     diag = float(np.hypot(H, Wd))
-    sigma = max(0.5, GT_BLUR_FRAC * diag + SMEAR_PER_SEVERITY * distortion * diag)
+    sigma = min(diag, max(0.5, GT_BLUR_FRAC * diag + SMEAR_PER_SEVERITY * distortion * diag))
     disp = cv2.GaussianBlur(disp, (0, 0), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REPLICATE)
     lo, hi = np.log(GT_SCALE_RANGE[0]), np.log(GT_SCALE_RANGE[1])
     scale = float(np.exp(rng.uniform(lo, hi)))
