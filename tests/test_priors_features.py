@@ -121,3 +121,37 @@ def test_openclip_missing_weights_one_line_error(tmp_path):
         get_feature_provider({"provider": "dino"})
     with pytest.raises(InputError, match="priors.features.noise"):
         get_feature_provider({"provider": "text-aligned", "noise": -1})
+
+
+def test_feature_knobs_change_the_cache_key_and_per_track_means(tmp_path):
+    scene = make_sphere_scene(4, 48, 36, arc_deg=30.0, heights=(1.5,))
+    views = [0, 1, 2, 3]
+    keys = set()
+    for f in ({}, {"noise": 0.2}, {"context": 0.3}):
+        p = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0, "propagator": "reproject"},
+                                   "features": dict(provider="text-aligned", **f)},
+                           views, (48, 36), tmp_path, False, True, True, progress=False)
+        keys.add(p.cache["features"]["key"])
+    assert len(keys) == 3
+    q = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0, "propagator": "reproject"},
+                               "features": {"provider": "text-aligned", "per_track": True}},
+                       views, (48, 36), tmp_path, False, True, True, progress=False)
+    assert q.providers["features"].endswith("+track-mean")
+    by_track: dict = {}
+    for (v, t), vec in q.mask_features.items():
+        by_track.setdefault(t, []).append(vec)
+    multi = [vs for vs in by_track.values() if len(vs) > 1]
+    assert multi and all(np.array_equal(vs[0], w) for vs in multi for w in vs)
+    assert all(abs(np.linalg.norm(vs[0]) - 1) < 1e-5 for vs in multi)
+    # the track mean lies between the per-view features: closer to each than they are to each other
+    base = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0, "propagator": "reproject"},
+                                  "features": {"provider": "text-aligned"}},
+                          views, (48, 36), tmp_path, False, True, True, progress=False)
+    t = next(t for t, vs in by_track.items() if len(vs) > 1)
+    per_view = [base.mask_features[k] for k in sorted(base.mask_features) if k[1] == t]
+    assert len(per_view) > 1 and not np.array_equal(per_view[0], per_view[1])
+    assert by_track[t][0] @ per_view[0] >= per_view[0] @ per_view[1] - 1e-6
+    r = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0},
+                               "features": {"provider": "text-aligned", "per_track": True}},
+                       views, (48, 36), None, False, True, True, per_frame_masks=True, progress=False)
+    assert "features.per_track" in r.skipped and not r.providers["features"].endswith("+track-mean")
