@@ -75,3 +75,28 @@ def test_float64_reference_of_a_cosine():
     v = C.GAMMA * C._C_I + C.DELTA * C.concept("ball")
     expect = (C.GAMMA * C.ALPHA * C.RHO + C.DELTA * C.BETA) / np.linalg.norm(v)
     assert abs(float(t @ (v / np.linalg.norm(v))) - expect) < 1e-6
+
+
+def test_pipeline_mask_features_pass_lerf_relevancy_like_clip():
+    """GT masks at the default noise and context: the own class beats the negatives, others mostly do not."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_priors_scene import CLASS_NAMES, make_sphere_scene
+
+    from gsbench.priors import prepare_priors
+    scene = make_sphere_scene(3, 64, 48)
+    p = prepare_priors(scene, {"masks": {"provider": "gt"}, "features": {"provider": "text-aligned"}},
+                       [0, 1, 2], (64, 48), None, False, False, True, progress=False)
+    fp = p.feature_provider
+    q, neg = fp.encode_text(CLASS_NAMES), fp.encode_text(list(fp.canonical_negatives))
+    own, other = [], []
+    for (_v, t), f in p.mask_features.items():
+        cls = scene.instance_classes.get(t)
+        if cls is None:
+            continue
+        r = lerf_relevancy(f.reshape(1, 1, -1), q, neg)[:, 0, 0]
+        own.append(r[cls])
+        other.extend(np.delete(r, cls))
+    assert len(own) >= 6
+    assert np.mean(np.array(own) > 0.5) == 1.0 and np.mean(np.array(other) < 0.5) > 0.9
