@@ -17,7 +17,16 @@ Pixels of t+1 that receive no point are "uncovered" and not compared. For every 
 present in both frames, IoU = |W=k & M=k| / |(W=k | M=k) & covered|; an id whose union inside
 the covered region is empty cannot be compared and is counted in `n_excluded`.
 The metric is the plain mean over all compared (pair, id) IoUs; None when there is none.
-Pure numpy.
+
+`adjacent_mask_iou_strict`: the same warp, but every id seen in the covered region of either
+frame is scored (ids in one frame only score 0). A track that ends and a new track that starts
+for the same object both count as misses, so re-labelling an object between frames is not free.
+
+`adjacent_mask_iou_flow`: the strict score for scenes without GT depth: frame t's ids are carried
+into t+1 by backward lookup through Farneback optical flow (OpenCV), an estimator other than the
+DIS flow the weight-free propagator uses, so the metric does not grade the propagator with its
+own warp; pixels failing the forward-backward check (|B(p) + F(p + B(p))|^2 < 0.01 (|B|^2 +
+|F|^2) + 0.5 px^2) are uncovered.
 """
 from __future__ import annotations
 
@@ -31,6 +40,10 @@ from ._common import finite_float, mean_or_none, to_numpy
 
 ORDERING_DISTANCE_IMPL = "ordering/adjacent-centre-distance/v1"
 ORDERING_MASK_IOU_IMPL = "ordering/adjacent-mask-iou/zbuffer-splat/v1"
+ORDERING_MASK_IOU_STRICT_IMPL = "ordering/adjacent-mask-iou-strict/zbuffer-splat/v1"
+ORDERING_MASK_IOU_FLOW_IMPL = "ordering/adjacent-mask-iou-strict/farneback-fb/v1"
+FB_ALPHA = 0.01
+FB_BETA = 0.5
 
 
 def mean_adjacent_distance(centers: Any, order: Sequence[int]) -> float | None:
@@ -112,9 +125,42 @@ def warp_track_ids(mask_a: np.ndarray, depth_a: np.ndarray, cam_a: tuple, cam_b:
     return out
 
 
+def _score_pair(warped: np.ndarray, covered: np.ndarray, ma: np.ndarray, mb: np.ndarray, strict: bool
+                ) -> tuple[dict[int, float], int]:
+    if strict:
+        ids = sorted(set(np.unique(warped[covered & (warped >= 0)]).tolist())
+                     | set(np.unique(mb[covered & (mb >= 0)]).tolist()))
+    else:
+        ids = sorted(set(np.unique(ma[ma >= 0]).tolist()) & set(np.unique(mb[mb >= 0]).tolist()))
+    ious: dict[int, float] = {}
+    excluded = 0
+    for k in ids:
+        wk = warped == k
+        mk = (mb == k) & covered
+        union = int(np.count_nonzero(wk | mk))
+        if union == 0:
+            excluded += 1
+            continue
+        ious[int(k)] = int(np.count_nonzero(wk & mk)) / union
+    return ious, excluded
+
+
+def _check_masks(masks_in_order: Sequence[Any]) -> list[np.ndarray]:
+    out = []
+    for t, x in enumerate(masks_in_order):
+        m = to_numpy(x, f"masks[{t}]")
+        if m.ndim != 2 or not np.issubdtype(m.dtype, np.integer):
+            raise InputError(f"masks[{t}]: expected an integer (H, W) track-id map, got {m.dtype} {m.shape}")
+        out.append(m.astype(np.int64))
+    return out
+
+
 def adjacent_mask_iou_pairs(masks_in_order: Sequence[Any], depths: Sequence[Any], cameras: Sequence[Any], *,
-                            occlusion_tol: float = 0.05) -> list[dict]:
-    """Per neighbouring pair: {"pair": (t, t+1), "ious": {track id: IoU}, "n_excluded": int}."""
+                            occlusion_tol: float = 0.05, strict: bool = False) -> list[dict]:
+    """Per neighbouring pair: {"pair": (t, t+1), "ious": {track id: IoU}, "n_excluded": int}.
+
+    strict=False scores ids present in both frames; strict=True every id seen in either frame.
+    """
     n = len(masks_in_order)
     if len(depths) != n or len(cameras) != n:
         raise InputError(f"adjacent_mask_iou: {n} masks but {len(depths)} depths and {len(cameras)} cameras")
@@ -133,17 +179,7 @@ def adjacent_mask_iou_pairs(masks_in_order: Sequence[Any], depths: Sequence[Any]
         mb, db, cb = masks[t + 1]
         warped = warp_track_ids(ma, da, ca, cb, mb.shape, db, occlusion_tol)
         covered = warped != -2
-        shared = sorted(set(np.unique(ma[ma >= 0]).tolist()) & set(np.unique(mb[mb >= 0]).tolist()))
-        ious: dict[int, float] = {}
-        excluded = 0
-        for k in shared:
-            wk = warped == k
-            mk = (mb == k) & covered
-            union = int(np.count_nonzero(wk | mk))
-            if union == 0:
-                excluded += 1
-                continue
-            ious[int(k)] = int(np.count_nonzero(wk & mk)) / union
+        ious, excluded = _score_pair(warped, covered, ma, mb, strict)
         out.append({"pair": (t, t + 1), "ious": ious, "n_excluded": excluded,
                     "covered_fraction": float(covered.mean())})
     return out
@@ -154,3 +190,67 @@ def adjacent_mask_iou(masks_in_order: Sequence[Any], depths: Sequence[Any], came
     """Mean IoU of shared track ids between neighbouring frames after depth warping (see module doc)."""
     pairs = adjacent_mask_iou_pairs(masks_in_order, depths, cameras, occlusion_tol=occlusion_tol)
     return mean_or_none(v for p in pairs for v in p["ious"].values())
+
+
+def adjacent_mask_iou_strict(masks_in_order: Sequence[Any], depths: Sequence[Any], cameras: Sequence[Any], *,
+                             occlusion_tol: float = 0.05) -> float | None:
+    """Mean IoU over every id seen in either neighbouring frame (new tracks count as misses)."""
+    pairs = adjacent_mask_iou_pairs(masks_in_order, depths, cameras, occlusion_tol=occlusion_tol, strict=True)
+    return mean_or_none(v for p in pairs for v in p["ious"].values())
+
+
+def _gray_u8(img: np.ndarray, name: str) -> np.ndarray:
+    a = finite_float(img, name)
+    if a.ndim == 3:
+        a = a[..., :3].mean(axis=-1)
+    if a.ndim != 2:
+        raise InputError(f"{name}: expected an (H, W) or (H, W, C) image, got {a.shape}")
+    return np.clip(np.rint(a * 255.0), 0, 255).astype(np.uint8)
+
+
+def _farneback(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    import cv2
+    return cv2.calcOpticalFlowFarneback(a, b, None, 0.5, 3, 9, 5, 5, 1.1, 0)
+
+
+def flow_warp_ids(mask_a: np.ndarray, image_a: np.ndarray, image_b: np.ndarray) -> np.ndarray:
+    """Frame a's ids carried into frame b through backward Farneback flow; -2 marks uncovered pixels."""
+    import cv2
+    F = _farneback(image_a, image_b)
+    B = _farneback(image_b, image_a)
+    H, W = mask_a.shape
+    xs, ys = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    qx, qy = xs + B[..., 0], ys + B[..., 1]
+    Fq = cv2.remap(F, qx, qy, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    err = ((B + Fq) ** 2).sum(-1)
+    mag = (B ** 2).sum(-1) + (Fq ** 2).sum(-1)
+    ix, iy = np.rint(qx).astype(np.int64), np.rint(qy).astype(np.int64)
+    ok = (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H) & (err < FB_ALPHA * mag + FB_BETA)
+    out = np.full((H, W), -2, dtype=np.int64)
+    out[ok] = mask_a[iy[ok], ix[ok]]
+    return out
+
+
+def adjacent_mask_iou_flow_pairs(masks_in_order: Sequence[Any], images_in_order: Sequence[Any]) -> list[dict]:
+    """Per neighbouring pair, the strict scores with a flow warp (see module doc)."""
+    masks = _check_masks(masks_in_order)
+    if len(images_in_order) != len(masks):
+        raise InputError(f"adjacent_mask_iou_flow: {len(masks)} masks but {len(images_in_order)} images")
+    grays = [_gray_u8(im, f"images[{t}]") for t, im in enumerate(images_in_order)]
+    for t, (m, g) in enumerate(zip(masks, grays)):
+        if m.shape != g.shape:
+            raise InputError(f"images[{t}] has shape {g.shape} but masks[{t}] has {m.shape}")
+    out = []
+    for t in range(len(masks) - 1):
+        warped = flow_warp_ids(masks[t], grays[t], grays[t + 1])
+        covered = warped != -2
+        ious, excluded = _score_pair(warped, covered, masks[t], masks[t + 1], True)
+        out.append({"pair": (t, t + 1), "ious": ious, "n_excluded": excluded,
+                    "covered_fraction": float(covered.mean())})
+    return out
+
+
+def adjacent_mask_iou_flow(masks_in_order: Sequence[Any], images_in_order: Sequence[Any]) -> float | None:
+    """Strict adjacent mask IoU with a Farneback flow warp: for scenes without GT depth."""
+    return mean_or_none(v for p in adjacent_mask_iou_flow_pairs(masks_in_order, images_in_order)
+                        for v in p["ious"].values())

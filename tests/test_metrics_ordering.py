@@ -102,3 +102,43 @@ def test_bad_input():
     with pytest.raises(InputError):
         adjacent_mask_iou([m, m], [d, d], [(K, np.eye(4)), "camera"])
     assert adjacent_mask_iou([m], [d], [(K, np.eye(4))]) is None
+
+
+# ------------------------------------------------------------------ strict and flow variants
+from gsbench.metrics.ordering import adjacent_mask_iou_flow, adjacent_mask_iou_strict  # noqa: E402
+
+
+def test_strict_counts_new_tracks_as_misses_hand():
+    depth = np.full((H, W), 2.0)
+    cams = [(K, _w2c(0.0)), (K, _w2c(0.4))]
+    a = _labels({0: (4, 8), 1: (10, 14)})
+    # frame b: object 1 got a new id 7 (a re-seeded track): lenient ignores it, strict scores 0 for 1 and 7
+    b = _labels({0: (2, 6), 7: (8, 12)})
+    assert adjacent_mask_iou([a, b], [depth, depth], cams) == pytest.approx(1.0)
+    assert adjacent_mask_iou_strict([a, b], [depth, depth], cams) == pytest.approx(1 / 3)
+    consistent = _labels({0: (2, 6), 1: (8, 12)})
+    assert adjacent_mask_iou_strict([a, consistent], [depth, depth], cams) == pytest.approx(1.0)
+    empty = np.full((H, W), -1, np.int32)
+    assert adjacent_mask_iou_strict([empty, empty], [depth, depth], cams) is None
+
+
+def _stripes(shift):
+    x = np.arange(64)[None, :] - shift
+    img = 0.5 + 0.4 * np.sin(x / 3.0) * np.cos(np.arange(48)[:, None] / 4.0)
+    return np.repeat(img[..., None], 3, axis=2)
+
+
+def test_flow_variant_follows_motion_and_counts_misses():
+    # a textured image moved 2 px right: ids moved with it score high, ids left in place score lower
+    a_img, b_img = _stripes(0), _stripes(2)
+    m = np.full((48, 64), -1, np.int32)
+    m[8:40, 8:28] = 0
+    m[8:40, 34:56] = 1
+    moved = np.roll(m, 2, axis=1)
+    good = adjacent_mask_iou_flow([m, moved], [a_img, b_img])
+    still = adjacent_mask_iou_flow([m, m], [a_img, b_img])
+    assert good > 0.85 and good > still
+    renamed = np.where(moved == 1, 5, moved)
+    assert adjacent_mask_iou_flow([m, renamed], [a_img, b_img]) < 0.6 * good
+    with pytest.raises(InputError, match="images"):
+        adjacent_mask_iou_flow([m, m], [a_img])

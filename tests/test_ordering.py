@@ -143,3 +143,40 @@ def test_prepare_priors_rejects_unknown_ordering():
     scene = make_sphere_scene(2, 16, 12)
     with pytest.raises(InputError, match="priors.ordering"):
         prepare_priors(scene, {"ordering": "zigzag"}, [0, 1], (16, 12), None, False, False, False, progress=False)
+
+
+def _targets(p, v):
+    """Per-pixel supervision target (the feature of the pixel's track; 0 where none)."""
+    m = p.masks[v]
+    out = np.zeros(m.shape + (512,), np.float32)
+    for t in np.unique(m[m >= 0]):
+        out[m == t] = p.mask_features[(v, int(t))]
+    return out
+
+
+def test_ordering_changes_the_supervision_and_strict_metric_ranks_it():
+    scene = make_sphere_scene(10, 64, 48)
+    views = list(range(len(scene.cameras)))
+    cfg = {"masks": {"provider": "simulated", "severity": 1}}
+    pr = {m: prepare_priors(scene, dict(cfg, ordering=m), views, (64, 48), None, False, True, True,
+                            progress=False) for m in ("pose", "random")}
+    differ = sum(int((np.abs(_targets(pr["pose"], v) - _targets(pr["random"], v)).max(-1) > 1e-6).sum())
+                 for v in views)
+    assert differ > 0
+    s_pose, s_rand = pr["pose"].stats, pr["random"].stats
+    # strict scores count new tracks as misses: never above the lenient score, and pose beats random
+    for s in (s_pose, s_rand):
+        assert s["ordering_adjacent_mask_iou_strict"] <= s["ordering_adjacent_mask_iou"] + 1e-12
+    assert s_pose["ordering_adjacent_mask_iou_strict"] > s_rand["ordering_adjacent_mask_iou_strict"]
+    assert s_pose["ordering_adjacent_mask_iou_flow"] > s_rand["ordering_adjacent_mask_iou_flow"]
+
+
+def test_flow_metric_is_reported_without_gt_depth():
+    scene = make_sphere_scene(4, 48, 36, arc_deg=30.0, heights=(1.5,))
+    scene.depth_loader = None
+    assert not scene.has_depth
+    p = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0}}, [0, 1, 2, 3], (48, 36), None,
+                       False, True, False, progress=False)
+    assert p.stats["ordering_adjacent_mask_iou"] is None and "ordering_adjacent_mask_iou" in p.skipped
+    assert p.stats["ordering_adjacent_mask_iou_strict"] is None
+    assert 0.0 < p.stats["ordering_adjacent_mask_iou_flow"] <= 1.0

@@ -10,6 +10,7 @@ from gsbench.priors import cache as C
 from gsbench.priors import depth as D
 from gsbench.priors import features as F
 from gsbench.priors import masks as M
+from gsbench.priors import segmenter as S
 from tests.test_priors_scene import make_sphere_scene
 
 CFG = {"ordering": "pose", "depth": {"provider": "gt", "noise": {"type": None, "severity": 0}},
@@ -71,7 +72,7 @@ def test_second_call_reuses_the_cache(scene, tmp_path, monkeypatch):
         raise AssertionError("provider called although the cache has the result")
 
     monkeypatch.setattr(D, "compute_depth", boom)
-    monkeypatch.setattr(M, "simulate_segments", boom)
+    monkeypatch.setattr(S, "segment_view", boom)
     monkeypatch.setattr(F.TextAlignedFeatures, "encode_masks", boom)
     second = run(scene, tmp_path)
     assert all(v["hit"] for v in second.cache.values())

@@ -23,9 +23,9 @@ def _affine_fit(x, y):
 
 def test_gt_prior_is_disparity_up_to_per_view_scale_and_shift():
     scene = make_sphere_scene(4, 96, 72)
-    p = prepare_priors(scene, {"depth": {"provider": "gt"}}, [0, 3, 5], (96, 72), None, True, False, False,
-                       seed=0, progress=False)
-    assert p.providers["depth"].startswith("gt-sim-disparity")
+    p = prepare_priors(scene, {"depth": {"provider": "gt", "distortion": 0}}, [0, 3, 5], (96, 72), None, True,
+                       False, False, seed=0, progress=False)
+    assert p.providers["depth"] == "gt-sim-disparity-v2:d0"
     coefs = []
     for v in (0, 3, 5):
         dp = p.depth[v]
@@ -173,3 +173,31 @@ def test_zbuffer_splat_keeps_nearest():
     pts = np.array([[0.0, 0.0, 5.0], [0.0, 0.0, 1.0], [0.0, 0.0, 3.0]])   # all on the axis, pixel (2, 2)
     vals, zmap = W.zbuffer_splat(pts, np.array([7, 8, 9], dtype=np.int32), cam, fill=np.int32(-1))
     assert vals[2, 2] == 8 and zmap[2, 2] == 1.0 and (vals >= 0).sum() == 1
+
+
+def test_distortion_severity_adds_what_scale_shift_cannot_remove(tmp_path):
+    from gsbench.priors.depth import gt_disparity_prior
+    z = make_sphere_scene(1, 96, 72).gt_depth(0)
+    ok = z > 0
+    inv = np.where(ok, 1.0 / np.maximum(z, 1e-9), 0.0)
+    res = []
+    for sev in (0, 1, 3):
+        vals, valid = gt_disparity_prior(z, np.random.default_rng(4), sev)
+        assert np.array_equal(valid, ok) and np.isfinite(vals).all()
+        (_, _), r = _affine_fit(inv[ok], vals[ok].astype(np.float64))
+        res.append(float(np.sqrt(np.mean(r ** 2)) / np.ptp(vals[ok])))
+    assert res[0] < res[1] < res[2]
+    # the same rng gives the same scale and shift whatever the severity: only the distortion moves
+    a, _ = gt_disparity_prior(z, np.random.default_rng(4), 0)
+    b, _ = gt_disparity_prior(z, np.random.default_rng(4), 0)
+    assert np.array_equal(a, b)
+    # extreme severity stays finite (exp is clipped)
+    big, _ = gt_disparity_prior(z, np.random.default_rng(4), 1e6)
+    assert np.isfinite(big).all()
+    scene = make_sphere_scene(2, 48, 36)
+    keys = {prepare_priors(scene, {"depth": {"provider": "gt", "distortion": d}}, [0, 1], (48, 36), tmp_path,
+                           True, False, False, progress=False).cache["depth"]["key"] for d in (0, 1, 2)}
+    assert len(keys) == 3
+    with pytest.raises(InputError, match="priors.depth.distortion"):
+        prepare_priors(scene, {"depth": {"provider": "gt", "distortion": -1}}, [0], (48, 36), None, True, False,
+                       False, progress=False)

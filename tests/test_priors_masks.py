@@ -41,35 +41,6 @@ def test_match_segments_hungarian_and_threshold():
     assert P.match_segments(warped, known, seg, min_iou=0.6) == {7: 0, 3: 1}
 
 
-def test_simulated_severity_zero_is_a_relabelling_of_gt():
-    scene = make_sphere_scene(2, 64, 48)
-    inst = scene.gt_instances(0)
-    seg = M.simulate_segments(inst, 0, np.random.default_rng(1))
-    assert seg.dtype == np.int32 and same_partition(seg, inst)
-
-
-def test_simulated_failures_grow_with_severity_and_are_seeded():
-    scene = make_sphere_scene(2, 96, 72)
-    inst = scene.gt_instances(1)
-    disagree = []
-    for sev in (1, 3, 5):
-        segs = [M.simulate_segments(inst, sev, np.random.default_rng(s)) for s in range(6)]
-        # fraction of pixels whose (segment -> majority GT instance) label is wrong
-        errs = []
-        for seg in segs:
-            wrong = 0
-            for s in np.unique(seg[seg >= 0]):
-                vals, cnt = np.unique(inst[seg == s], return_counts=True)
-                wrong += cnt.sum() - cnt.max()
-            wrong += np.sum((seg < 0) != (inst < 0))
-            errs.append(wrong / inst.size)
-        disagree.append(np.mean(errs))
-    assert 0 < disagree[0] < disagree[1] < disagree[2]
-    a = M.simulate_segments(inst, 2, np.random.default_rng(3))
-    b = M.simulate_segments(inst, 2, np.random.default_rng(3))
-    assert np.array_equal(a, b)
-
-
 def test_simulated_ids_permuted_per_view():
     scene = make_sphere_scene(4, 64, 48)
     p = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0}}, list(range(8)), (64, 48), None,
@@ -102,31 +73,40 @@ def test_propagation_makes_ids_consistent(propagator):
     views = list(range(12))
     p = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0, "propagator": propagator}},
                        views, (96, 72), None, False, True, False, progress=False)
-    assert p.providers["masks"] == f"simulated-v1:s0+{propagator}"
+    assert p.providers["masks"] == f"sam-sim-v2:merge0-split0-miss0-leak0-texture0+carry-{propagator}"
     m = gt_to_track(scene, p.masks, views)
-    assert len(m) >= 4 and all(len(t) == 1 for t in m.values())
-    assert p.stats["ordering_adjacent_mask_iou"] > 0.9
+    consistent = sum(len(t) == 1 for t in m.values())
+    # depth reprojection carries every object; DIS flow drifts and may re-seed one object once
+    assert len(m) >= 4 and consistent >= (len(m) if propagator == "reproject" else len(m) - 1)
+    # carried flow labels drift at object edges (no re-segmentation where the warp is confident)
+    assert p.stats["ordering_adjacent_mask_iou"] > (0.9 if propagator == "reproject" else 0.8)
+    assert p.stats["ordering_adjacent_mask_iou_strict"] > (0.85 if propagator == "reproject" else 0.7)
+    assert p.stats["ordering_adjacent_mask_iou_flow"] > 0.5
     # the unpropagated per-frame segments are not consistent
     q = prepare_priors(scene, {"masks": {"provider": "simulated", "severity": 0}}, views, (96, 72), None,
                        False, True, False, per_frame_masks=True, progress=False)
     assert any(len(t) > 1 for t in gt_to_track(scene, q.masks, views).values())
 
 
-def test_adjacent_mask_iou_reference_values():
-    scene = make_sphere_scene(6, 96, 72, arc_deg=60.0, heights=(1.5,))
-    views = list(range(6))
-    cams = {v: scene.cameras[v] for v in views}
-    depths = {v: scene.gt_depth(v) for v in views}
-    valids = {v: depths[v] > 0 for v in views}
-    gt = {v: scene.gt_instances(v) for v in views}
-    # GT instances are perfectly consistent: IoU close to 1 (only pixel quantisation at edges)
-    assert P.adjacent_mask_iou_all_ids(gt, views, cams, depths, valids) > 0.9
-    # give every view its own ids: no id is shared -> exactly 0
-    own = {v: np.where(gt[v] >= 0, gt[v] + 100 * v, -1) for v in views}
-    assert P.adjacent_mask_iou_all_ids(own, views, cams, depths, valids) == 0.0
-    # no labels at all: nothing to score
-    empty = {v: np.full_like(gt[v], -1) for v in views}
-    assert P.adjacent_mask_iou_all_ids(empty, views, cams, depths, valids) is None
+def test_carried_partition_replaces_the_frames_own_segments():
+    # frame 1's own segments split the image in two; the carried reference (one track) wins
+    seg0 = np.zeros((6, 8), np.int32)
+    seg1 = np.where(np.arange(8)[None, :] < 4, 0, 1).repeat(6, 0).astype(np.int32)
+    identity = lambda prev, cur, lab: (lab.copy(), np.ones(lab.shape, bool))  # noqa: E731
+    t = P.propagate([0, 1], {0: seg0, 1: seg1}, identity, min_track_area=2)
+    assert np.array_equal(t[1], t[0]) and len(np.unique(t[1])) == 1
+    # where the warp knows nothing, the frame's segments fill in: a new object gets a new track
+    def half_known(prev, cur, lab):
+        known = np.zeros(lab.shape, bool)
+        known[:, :4] = True
+        return np.where(known, lab, -1), known
+    t = P.propagate([0, 1], {0: seg0, 1: seg1}, half_known, min_track_area=2)
+    assert set(np.unique(t[1][:, :4])) == {0} and set(np.unique(t[1][:, 4:])) == {1}
+    # a carried track below min_track_area is lost and re-seeded from the matching segment
+    seg_a = np.zeros((6, 8), np.int32)
+    seg_a[0, 0] = 1                                        # tiny track 1 in the reference
+    t = P.propagate([0, 1], {0: seg_a, 1: seg0}, identity, min_track_area=2)
+    assert np.all(t[1] == 0)
 
 
 def test_gt_masks_are_gt_instances():

@@ -11,7 +11,7 @@ from gsbench.collect import collect
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.data import Results
 from gsbench.reports.shares import mean_shares, read_shares
-from test_report_synthetic import write_run
+from tests.test_report_synthetic import write_run
 
 
 def _budget_runs(root: Path) -> None:

@@ -13,7 +13,7 @@ from gsbench.reports.claims import (
     INCONCLUSIVE, NOT_RUN, NOT_TESTABLE, OPPOSITE, PAPER_CLAIMS, REPRODUCED, claims_table, verdict,
 )
 from gsbench.reports.data import Results
-from test_report_synthetic import write_run
+from tests.test_report_synthetic import write_run
 
 SEED_NOISE = [0.0, 0.3, -0.2]  # shared by both rows of a seed: pairing removes it
 

@@ -7,7 +7,8 @@ Public API (the priors interface in the team contract):
   DepthPrior, Priors, FeatureProvider, CANONICAL_NEGATIVES
 
 Modules: ordering (pose / random / filename chains), depth (gt / sparse / depth-anything),
-masks (gt / simulated / sam2), propagation (flow / reproject propagators, adjacent mask IoU),
+masks (gt / simulated / sam2), segmenter (SAM-like weight-free failures), propagation (carried
+tracks, flow / reproject warps), clipspace (CLIP-geometry text/image space),
 features (text-aligned / openclip), cache (content-hash disk cache), warp (geometry helpers),
 pipeline (prepare_priors). Real providers import torch-vision libraries lazily.
 """

@@ -6,6 +6,11 @@
   pixels count as disparity 0, like sky), then a random per-view scale (log-uniform in
   ``GT_SCALE_RANGE``) and shift (uniform in ``GT_SHIFT_RANGE``) seeded by (seed, view id). The
   scale and shift differ per view, so the loss's scale-shift alignment is genuinely needed.
+  ``distortion`` (severity >= 0, default 1) adds what a scale-shift fit cannot remove, as
+  monocular estimators do: a low-frequency per-view multiplicative warp of the disparity,
+  exp(DIST_PER_SEVERITY * severity * f) with f a smooth unit-std field (a DIST_GRID random grid
+  upsampled bicubically), and extra edge smearing (blur sigma grows by SMEAR_PER_SEVERITY of the
+  diagonal per severity, at most one diagonal). Severity 0 is the plain scale-shift model.
   Kind ``disparity``; valid where the GT depth is.
 - ``sparse``: the scene's sparse points projected into each view with a z-buffer (nearest point
   per pixel). Kind ``depth``; valid only at pixels a point lands on. There are no per-point
@@ -38,7 +43,10 @@ DEPTH_KINDS = ("disparity", "depth", "metric")
 GT_BLUR_FRAC = 0.005
 GT_SCALE_RANGE = (0.5, 2.0)
 GT_SHIFT_RANGE = (0.0, 0.5)
-GT_VERSION = 1
+GT_VERSION = 2
+DIST_PER_SEVERITY = 0.1
+DIST_GRID = (3, 4)
+SMEAR_PER_SEVERITY = 0.004
 SPARSE_VERSION = 1
 DA_VERSION = 1
 
@@ -65,7 +73,17 @@ def view_rng(seed: int, view: int, salt: str) -> np.random.Generator:
     return np.random.default_rng(int.from_bytes(h[:8], "little"))
 
 
-def gt_disparity_prior(depth: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def smooth_field(shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
+    """A low-frequency field with zero mean and unit std (DIST_GRID noise, bicubic upsampling)."""
+    H, Wd = shape
+    f = cv2.resize(rng.standard_normal(DIST_GRID), (Wd, H), interpolation=cv2.INTER_CUBIC).astype(np.float64)
+    f -= f.mean()
+    sd = float(f.std())
+    return f / sd if sd > 1e-12 else f
+
+
+def gt_disparity_prior(depth: np.ndarray, rng: np.random.Generator, distortion: float = 0.0
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """Estimator-like disparity from a GT z map (see module doc): (values float32, valid bool)."""
     z = np.asarray(depth, dtype=np.float64)
     valid = np.isfinite(z) & (z > W.NEAR)
@@ -76,11 +94,14 @@ def gt_disparity_prior(depth: np.ndarray, rng: np.random.Generator) -> tuple[np.
     med = float(np.median(disp[valid]))
     disp /= med if med > 0 else 1.0
     H, Wd = z.shape
-    sigma = max(0.5, GT_BLUR_FRAC * float(np.hypot(H, Wd)))
+    diag = float(np.hypot(H, Wd))
+    sigma = min(diag, max(0.5, GT_BLUR_FRAC * diag + SMEAR_PER_SEVERITY * distortion * diag))
     disp = cv2.GaussianBlur(disp, (0, 0), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REPLICATE)
     lo, hi = np.log(GT_SCALE_RANGE[0]), np.log(GT_SCALE_RANGE[1])
     scale = float(np.exp(rng.uniform(lo, hi)))
     shift = float(rng.uniform(*GT_SHIFT_RANGE))
+    field = smooth_field((H, Wd), rng)            # drawn always: the knob does not shift the stream
+    disp = disp * np.exp(np.clip(DIST_PER_SEVERITY * distortion * field, -20.0, 20.0))
     return (scale * disp + shift).astype(np.float32), valid
 
 
@@ -131,13 +152,25 @@ class DepthAnything:
         return pred.cpu().numpy().astype(np.float32)
 
 
+def distortion_of(depth_cfg: Mapping) -> float:
+    """The `priors.depth.distortion` severity (>= 0) of the gt provider."""
+    v = depth_cfg.get("distortion", 1)
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        raise InputError(f"priors.depth.distortion: must be a number >= 0, got {v!r}") from None
+    if not np.isfinite(v) or v < 0:
+        raise InputError(f"priors.depth.distortion: must be a number >= 0, got {v}")
+    return v
+
+
 def depth_provider_id(depth_cfg: Mapping) -> str | None:
     """The id recorded in results (before noise); None for ``none``. Real ids need the model."""
     p = depth_cfg.get("provider", "gt")
     if p in (None, "none"):
         return None
     if p == "gt":
-        return f"gt-sim-disparity-v{GT_VERSION}"
+        return f"gt-sim-disparity-v{GT_VERSION}:d{distortion_of(depth_cfg):g}"
     if p == "sparse":
         return f"sparse-points-v{SPARSE_VERSION}"
     if p == "depth-anything":
@@ -159,7 +192,7 @@ def compute_depth(scene, depth_cfg: Mapping, view_ids: Sequence[int], size: tupl
                              "(use sparse or depth-anything)")
         for v in bar(view_ids):
             z = W.resize_nearest(np.asarray(scene.gt_depth(v), dtype=np.float32), size)
-            vals, valid = gt_disparity_prior(z, view_rng(seed, v, "gt-depth"))
+            vals, valid = gt_disparity_prior(z, view_rng(seed, v, "gt-depth"), distortion_of(depth_cfg))
             out[v] = DepthPrior(vals, valid, "disparity", pid)
     elif p == "sparse":
         if not scene.has_points:

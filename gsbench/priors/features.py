@@ -1,12 +1,13 @@
 """Feature providers: 512-d unit vectors per mask and per text query (one shared space).
 
-- ``text-aligned`` (weight-free simulation for synthetic scenes): every name gets a fixed unit
-  vector drawn from a generator seeded by sha256 of the normalised name (lower case, single
-  spaces), so it is stateless and identical at evaluation time. A mask's vector is the vector of
-  the majority GT class under the mask in that view (pixels with no class vote for the reserved
-  name ``UNLABELLED``), plus Gaussian noise whose expected L2 norm is ``noise`` (per-component
-  std noise / sqrt(512), seeded by (seed, view, mask id)), renormalised. Text queries map to
-  the same vectors; the canonical negatives get their own.
+- ``text-aligned`` (weight-free simulation for synthetic scenes, CLIP-like): text and image
+  vectors live in `gsbench.priors.clipspace` (CLIP's narrow cone and modality gap). A mask's
+  vector is computed from what the mask covers, as CLIP sees a crop: the pixel-weighted mix of
+  the GT classes inside the mask (pixels with no class count as background), plus a share
+  ``context`` of the classes in the ring around it (its bounding box grown by half its size,
+  minus the mask: the crop's surroundings), plus a per-mask noise direction of weight ``noise``
+  seeded by (seed, view, the mask's pixels). A leaking or merged mask gets a blended vector, and one
+  object gets different vectors in different views. Text queries map to `clipspace.text_vector`.
 - ``openclip``: OpenCLIP ViT-B/16 from a local checkpoint, never downloading. A mask's crop:
   background blacked out, cropped to the mask's bounding box, padded to a square with black,
   then the model's own preprocessing (resize to 224 x 224, CLIP normalisation). L2-normalised.
@@ -20,35 +21,21 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from gsbench.errors import InputError
+from gsbench.priors import clipspace as C
 from gsbench.priors.weights import require_weights
 
-FEATURE_DIM = 512
-CANONICAL_NEGATIVES = ("object", "things", "stuff", "texture")
-UNLABELLED = "<unlabelled>"
+FEATURE_DIM = C.DIM
+CANONICAL_NEGATIVES = C.CANONICAL_NEGATIVES
+UNLABELLED = C.BACKGROUND
 FEATURE_PROVIDERS = ("text-aligned", "openclip")
+CONTEXT_GROW = 0.5
 
 
 def _unit_rows(x: np.ndarray) -> np.ndarray:
-    x = np.asarray(x, dtype=np.float64)
-    n = np.linalg.norm(x, axis=-1, keepdims=True)
-    if np.any(n <= 1e-12):
-        raise ValueError("cannot normalise a zero feature vector")
-    return (x / n).astype(np.float32)
+    return C.unit(x).astype(np.float32)
 
 
-def normalise_name(name: str) -> str:
-    return " ".join(str(name).strip().lower().split())
-
-
-def _seed_of(*parts) -> int:
-    h = hashlib.sha256(":".join(str(p) for p in parts).encode("utf-8")).digest()
-    return int.from_bytes(h[:8], "little")
-
-
-def name_vector(name: str) -> np.ndarray:
-    """The text-aligned table's fixed unit vector for `name` (stateless, deterministic)."""
-    rng = np.random.default_rng(_seed_of("gsbench-text-aligned-v1", normalise_name(name)))
-    return _unit_rows(rng.standard_normal(FEATURE_DIM))
+normalise_name = C.normalise_name
 
 
 def label_ids(labels: np.ndarray) -> list[int]:
@@ -74,58 +61,98 @@ class FeatureProvider:
         return {"id": self.id}
 
 
+def _number(value, key: str, hi: float | None = None) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{key}: must be a number, got {value!r}") from None
+    if not np.isfinite(v) or v < 0 or (hi is not None and v > hi):
+        raise InputError(f"{key}: must be in [0, {hi if hi is not None else 'inf'}], got {v}")
+    return v
+
+
+def gt_class_map(scene, view: int, size: tuple[int, int]) -> np.ndarray:
+    """GT class index per pixel of `view` at `size` = (W, H) (-1 none)."""
+    from gsbench.priors.warp import resize_nearest
+    if scene.has_semantics:
+        return resize_nearest(np.asarray(scene.gt_classes(view)).astype(np.int64), size)
+    if scene.has_instances and scene.instance_classes and scene.class_names:
+        inst = resize_nearest(np.asarray(scene.gt_instances(view)).astype(np.int64), size)
+        lut = {int(k): int(c) for k, c in scene.instance_classes.items()}
+        keys = np.array(sorted(lut), dtype=np.int64)
+        vals = np.array([lut[k] for k in keys], dtype=np.int64)
+        out = np.full(inst.shape, -1, np.int64)
+        pos = np.isin(inst, keys)
+        out[pos] = vals[np.searchsorted(keys, inst[pos])]
+        return out
+    raise InputError(f"{scene.path}: priors.features.provider=text-aligned needs GT classes "
+                     "(a synthetic scene); use openclip for real scenes")
+
+
+def class_shares(cls: np.ndarray, region: np.ndarray, names: Sequence[str]) -> dict[str, float]:
+    """Share of each class name among the pixels of `region` (no class: the background name)."""
+    c = cls[region]
+    if c.size == 0:
+        return {}
+    c = np.where((c >= 0) & (c < len(names)), c, -1)
+    vals, counts = np.unique(c, return_counts=True)
+    tot = float(counts.sum())
+    return {(names[int(v)] if v >= 0 else UNLABELLED): float(n) / tot for v, n in zip(vals, counts)}
+
+
+def context_ring(mask: np.ndarray) -> np.ndarray:
+    """The crop's surroundings: the mask's bounding box grown by CONTEXT_GROW of its size, minus the mask."""
+    ys, xs = np.nonzero(mask)
+    H, W = mask.shape
+    gy = int(np.ceil(CONTEXT_GROW * (ys.max() - ys.min() + 1) / 2))
+    gx = int(np.ceil(CONTEXT_GROW * (xs.max() - xs.min() + 1) / 2))
+    box = np.zeros_like(mask)
+    box[max(0, ys.min() - gy):min(H, ys.max() + 1 + gy), max(0, xs.min() - gx):min(W, xs.max() + 1 + gx)] = True
+    return box & ~mask
+
+
 class TextAlignedFeatures(FeatureProvider):
-    """Weight-free text-aligned class table (see module doc)."""
+    """Weight-free CLIP-like mask and text features (see module doc)."""
 
-    version = 1
+    version = 2
 
-    def __init__(self, noise: float = 0.05):
-        noise = float(noise)
-        if not np.isfinite(noise) or noise < 0:
-            raise InputError(f"priors.features.noise: must be a finite number >= 0, got {noise}")
-        self.noise = noise
-        self.id = f"text-aligned-sim-v{self.version}"
+    def __init__(self, noise: float = 0.4, context: float = 0.15):
+        self.noise = _number(noise, "priors.features.noise")
+        self.context = _number(context, "priors.features.context", 1.0)
+        self.id = f"text-aligned-clipsim-v{self.version}"
 
     def cache_params(self) -> dict:
-        return {"id": self.id, "noise": self.noise}
+        return {"id": self.id, "noise": self.noise, "context": self.context, "space": C.SPACE_VERSION}
 
     def encode_text(self, texts: Sequence[str]) -> np.ndarray:
         if len(texts) == 0:
             return np.zeros((0, FEATURE_DIM), np.float32)
-        return np.stack([name_vector(t) for t in texts])
+        return np.stack([C.text_vector(t) for t in texts])
 
-    def mask_classes(self, scene, view: int, labels: np.ndarray) -> dict[int, str]:
-        """Majority GT class name under each mask of `labels` in `view`."""
-        from gsbench.priors.warp import resize_nearest
-        size = (labels.shape[1], labels.shape[0])
-        if scene.has_semantics:
-            cls = resize_nearest(np.asarray(scene.gt_classes(view)).astype(np.int64), size)
-        elif scene.has_instances and scene.instance_classes and scene.class_names:
-            inst = resize_nearest(np.asarray(scene.gt_instances(view)).astype(np.int64), size)
-            lut = {int(k): int(c) for k, c in scene.instance_classes.items()}
-            cls = np.vectorize(lambda i: lut.get(int(i), -1), otypes=[np.int64])(inst) if inst.size else inst
-        else:
-            raise InputError(f"{scene.path}: priors.features.provider=text-aligned needs GT classes "
-                             "(a synthetic scene); use openclip for real scenes")
+    def mask_shares(self, scene, view: int, labels: np.ndarray) -> dict[int, dict[str, float]]:
+        """Per mask id: {class name: weight} of the mask's pixels mixed with its context ring."""
+        cls = gt_class_map(scene, view, (labels.shape[1], labels.shape[0]))
         names = list(scene.class_names)
         out = {}
-        lab = labels.astype(np.int64)
         for i in label_ids(labels):
-            c = cls[lab == i]
-            c = np.where((c >= 0) & (c < len(names)), c, -1)
-            vals, counts = np.unique(c, return_counts=True)
-            best = int(vals[np.argmax(counts)])       # ties: lowest class index (np.unique sorts)
-            out[i] = names[best] if best >= 0 else UNLABELLED
+            m = labels == i
+            inside = class_shares(cls, m, names)
+            ring = class_shares(cls, context_ring(m), names) if self.context > 0 else {}
+            a = self.context if ring else 0.0
+            mix = {k: (1.0 - a) * w for k, w in inside.items()}
+            for k, w in ring.items():
+                mix[k] = mix.get(k, 0.0) + a * w
+            out[i] = mix
         return out
 
     def encode_masks(self, scene, view: int, image: np.ndarray, labels: np.ndarray,
                      seed: int = 0) -> dict[int, np.ndarray]:
         out = {}
-        for i, name in self.mask_classes(scene, view, labels).items():
-            base = name_vector(name).astype(np.float64)
-            rng = np.random.default_rng(_seed_of("text-aligned-noise", seed, view, i))
-            noise = rng.standard_normal(FEATURE_DIM) * (self.noise / np.sqrt(FEATURE_DIM))
-            out[i] = _unit_rows(base + noise)
+        for i, mix in self.mask_shares(scene, view, labels).items():
+            # seeded by what the mask covers, not its id: the same crop gives the same vector
+            digest = hashlib.sha256(np.packbits(labels == i).tobytes()).hexdigest()[:16]
+            n = C.random_direction("mask-noise", seed, view, digest)
+            out[i] = C.image_vector(mix, self.noise, n)
         return out
 
 
@@ -220,7 +247,7 @@ def get_feature_provider(features_cfg: Mapping) -> FeatureProvider:
     """The feature provider of the `priors.features` config (models are loaded once per process)."""
     name = features_cfg.get("provider", "text-aligned")
     if name == "text-aligned":
-        return TextAlignedFeatures(features_cfg.get("noise", 0.05))
+        return TextAlignedFeatures(features_cfg.get("noise", 0.4), features_cfg.get("context", 0.15))
     if name == "openclip":
         key = ("openclip", features_cfg.get("checkpoint"), features_cfg.get("model", "ViT-B-16"))
         if key not in _PROVIDERS:

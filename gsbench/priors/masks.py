@@ -1,17 +1,9 @@
 """Mask providers: per-view segments and view-consistent tracks.
 
 - ``gt``: the scene's GT instances (ids already consistent): the upper bound.
-- ``simulated`` (weight-free): per-view segments made from GT instances the way a per-frame
-  segmenter fails, then propagated by the weight-free propagator (`gsbench.priors.propagation`).
-  Failures, per view, seeded by (seed, view id), growing with ``severity`` (0 = perfect):
-    * boundary jitter: the instance map is resampled through a smooth random displacement field
-      whose per-pixel std is ``JITTER_PER_SEVERITY * severity`` of the image diagonal;
-    * merges: each instance is merged with a random touching neighbour with probability
-      ``MERGE_PER_SEVERITY * severity``;
-    * splits: each segment is cut in two by a random line through its centroid with probability
-      ``SPLIT_PER_SEVERITY * severity``;
-    * segments smaller than ``MIN_SEGMENT_AREA`` pixels are dropped (as automatic segmenters do);
-    * ids are permuted per view (ids mean nothing across views before propagation).
+- ``simulated`` (weight-free): per-view segments from `gsbench.priors.segmenter` (a SAM-like
+  segmenter with five failure knobs), then carried along the pseudo-video by
+  `gsbench.priors.propagation`, which replaces each view's own partition by the carried one.
 - ``sam2``: SAM2 automatic masks on the first pseudo-video frame, then the SAM2 video predictor
   carries them along the ordered frames (local checkpoint, CPU float32). Optional keys:
   ``generator`` (kwargs of SAM2AutomaticMaskGenerator, e.g. points_per_side) and
@@ -31,91 +23,7 @@ from tqdm.auto import tqdm
 from gsbench.errors import InputError
 from gsbench.priors.weights import require_weights
 
-JITTER_PER_SEVERITY = 0.006
-MERGE_PER_SEVERITY = 0.04
-SPLIT_PER_SEVERITY = 0.04
-MIN_SEGMENT_AREA = 8
-SIM_VERSION = 1
-
-
-def _neighbour_pairs(labels: np.ndarray) -> set[tuple[int, int]]:
-    pairs = set()
-    for a, b in ((labels[:, :-1], labels[:, 1:]), (labels[:-1, :], labels[1:, :])):
-        m = (a != b) & (a >= 0) & (b >= 0)
-        for x, y in np.unique(np.stack([a[m], b[m]], 1), axis=0) if m.any() else []:
-            pairs.add((int(min(x, y)), int(max(x, y))))
-    return pairs
-
-
-def _jitter(labels: np.ndarray, amp: float, rng: np.random.Generator) -> np.ndarray:
-    """Resample `labels` through a smooth random displacement field with per-pixel std `amp` px."""
-    H, W = labels.shape
-    if amp <= 0:
-        return labels.copy()
-    gh, gw = max(2, H // 16), max(2, W // 16)
-    field = rng.standard_normal((gh, gw, 2)).astype(np.float32)
-    field = cv2.resize(field, (W, H), interpolation=cv2.INTER_CUBIC)
-    std = float(field.reshape(-1, 2).std())
-    field *= amp / max(std, 1e-6)
-    xs, ys = np.meshgrid(np.arange(W), np.arange(H))
-    sx = np.clip(np.rint(xs + field[..., 0]), 0, W - 1).astype(np.int64)
-    sy = np.clip(np.rint(ys + field[..., 1]), 0, H - 1).astype(np.int64)
-    return labels[sy, sx]
-
-
-def simulate_segments(instances: np.ndarray, severity: int, rng: np.random.Generator) -> np.ndarray:
-    """Per-view segments (int32, -1 none, ids permuted) from a GT instance map (see module doc)."""
-    if severity < 0:
-        raise InputError(f"priors.masks.severity: must be >= 0, got {severity}")
-    lab = np.asarray(instances).astype(np.int64)
-    H, W = lab.shape
-    diag = float(np.hypot(H, W))
-    lab = _jitter(lab, JITTER_PER_SEVERITY * severity * diag, rng)
-    # merges (union-find over touching instances)
-    ids = [int(i) for i in np.unique(lab[lab >= 0])]
-    parent = {i: i for i in ids}
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    p_merge = min(1.0, MERGE_PER_SEVERITY * severity)
-    if p_merge > 0 and len(ids) > 1:
-        neigh: dict[int, list[int]] = {i: [] for i in ids}
-        for a, b in sorted(_neighbour_pairs(lab)):
-            neigh[a].append(b)
-            neigh[b].append(a)
-        for i in ids:
-            if neigh[i] and rng.random() < p_merge:
-                j = neigh[i][int(rng.integers(len(neigh[i])))]
-                parent[find(i)] = find(j)
-    seg = np.full((H, W), -1, dtype=np.int64)
-    for i in ids:
-        seg[lab == i] = find(i)
-    # splits
-    p_split = min(1.0, SPLIT_PER_SEVERITY * severity)
-    next_id = (max(ids) + 1) if ids else 0
-    if p_split > 0:
-        ys, xs = np.mgrid[0:H, 0:W]
-        for s in [int(x) for x in np.unique(seg[seg >= 0])]:
-            m = seg == s
-            if m.sum() < 2 * MIN_SEGMENT_AREA or rng.random() >= p_split:
-                continue
-            cy, cx = ys[m].mean(), xs[m].mean()
-            ang = rng.uniform(0, np.pi)
-            side = ((xs - cx) * np.cos(ang) + (ys - cy) * np.sin(ang)) > 0
-            seg[m & side] = next_id
-            next_id += 1
-    # drop tiny segments, permute ids
-    present, counts = np.unique(seg[seg >= 0], return_counts=True)
-    keep = present[counts >= MIN_SEGMENT_AREA]
-    out = np.full((H, W), -1, dtype=np.int32)
-    perm = rng.permutation(len(keep))
-    for new, s in zip(perm, keep):
-        out[seg == s] = int(new)
-    return out
+SIM_VERSION = 2
 
 
 def gt_instance_map(scene, view: int, size: tuple[int, int]) -> np.ndarray:

@@ -1,8 +1,10 @@
 """prepare_priors: the one entry point methods call to get order, depth, masks and features.
 
-The ordering statistics (`stats`) use the metric implementations of `gsbench.metrics.ordering`
-(their ids are recorded by the evaluation); `ordering_adjacent_mask_iou_all_ids` is a stricter
-diagnostic from `gsbench.priors.propagation` that also scores ids seen in only one frame as 0.
+The ordering statistics (`stats`) use the metric implementations of `gsbench.metrics.ordering`:
+`ordering_adjacent_mask_iou` (ids in both frames, GT-depth warp), `..._strict` (every id, new
+tracks count as misses, GT-depth warp) and `..._flow` (strict, optical-flow warp: also on scenes
+without GT depth). `priors.features.per_track: true` gives every view of a track the mean of its
+per-view features (renormalised), as methods that pool CLIP features per track do.
 
 Each part is computed by its provider (ids recorded in `Priors.providers`), cached on disk by a
 content hash (`gsbench.priors.cache`), and reused on the next call with the same inputs. Depth
@@ -23,6 +25,7 @@ from gsbench.metrics import ordering as MO
 from gsbench.priors import depth as D
 from gsbench.priors import masks as M
 from gsbench.priors import propagation as P
+from gsbench.priors import segmenter as S
 from gsbench.priors import warp as W
 from gsbench.priors.cache import PriorCache, cache_key, scene_content_hash
 from gsbench.priors.features import FeatureProvider, get_feature_provider
@@ -30,7 +33,7 @@ from gsbench.priors.ordering import ORDERINGS, camera_centers, order_views
 
 MASK_PROVIDERS = ("simulated", "gt", "sam2")
 PROPAGATORS = ("flow", "reproject")
-PIPELINE_VERSION = 1
+PIPELINE_VERSION = 2
 
 
 @dataclass
@@ -104,9 +107,9 @@ def _mask_provider_id(masks_cfg: Mapping, per_frame: bool) -> str:
     if p == "gt":
         return "gt-instances"
     if p == "simulated":
-        sev = int(masks_cfg.get("severity", 1))
-        tail = "per-frame" if per_frame else str(masks_cfg.get("propagator", "flow"))
-        return f"simulated-v{M.SIM_VERSION}:s{sev}+{tail}"
+        knobs = S.SegmenterKnobs.from_config(masks_cfg)
+        tail = "per-frame" if per_frame else f"carry-{masks_cfg.get('propagator', 'flow')}"
+        return f"sam-sim-v{S.SEGMENTER_VERSION}:{knobs.tag()}+{tail}"
     raise InputError(f"priors.masks.provider: unknown provider {p!r} (expected one of {', '.join(MASK_PROVIDERS)})")
 
 
@@ -123,8 +126,10 @@ def _compute_masks(scene, masks_cfg: Mapping, views, order, size, images: _Image
     if p == "gt":
         return {v: M.gt_instance_map(scene, v, size) for v in views}, pid
     # simulated
-    severity = int(masks_cfg.get("severity", 1))
-    segs = {v: M.simulate_segments(M.gt_instance_map(scene, v, size), severity, D.view_rng(seed, v, "sim-masks"))
+    knobs = S.SegmenterKnobs.from_config(masks_cfg)
+    gdepth = _gt_depths(scene, views, size)[0] if scene.has_depth else {}
+    segs = {v: S.segment_view(M.gt_instance_map(scene, v, size), knobs, D.view_rng(seed, v, "sim-masks"),
+                              images[v] if knobs.texture > 0 else None, gdepth.get(v))
             for v in tqdm(views, desc="simulated segments", disable=not progress, leave=False)}
     if per_frame:
         return segs, pid
@@ -245,22 +250,26 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
         ids = np.unique(np.concatenate([m[m >= 0].ravel() for m in masks.values()])) if masks else []
         stats["mask_tracks"] = int(len(ids))
         # adjacent mask IoU of the propagated masks (the ordering study's second metric)
+        strict_keys = ("ordering_adjacent_mask_iou", "ordering_adjacent_mask_iou_strict",
+                       "ordering_adjacent_mask_iou_flow")
         if per_frame_masks:
-            stats["ordering_adjacent_mask_iou"] = None
-            stats["ordering_adjacent_mask_iou_all_ids"] = None
-            skipped["ordering_adjacent_mask_iou"] = "per-frame masks are not propagated"
-        elif not scene.has_depth:
-            stats["ordering_adjacent_mask_iou"] = None
-            stats["ordering_adjacent_mask_iou_all_ids"] = None
-            skipped["ordering_adjacent_mask_iou"] = "the scene has no GT depth to warp masks between views"
+            for k in strict_keys:
+                stats[k] = None
+                skipped[k] = "per-frame masks are not propagated"
         else:
-            gd, gv = _gt_depths(scene, views, size)
-            cams = {v: W.camera_at(scene.cameras[v], size) for v in views}
-            # the official metric (gsbench.metrics.ordering: ids present in both frames) ...
-            stats["ordering_adjacent_mask_iou"] = MO.adjacent_mask_iou(
-                [masks[v] for v in order], [np.where(gv[v], gd[v], 0.0) for v in order], [cams[v] for v in order])
-            # ... and a stricter diagnostic where an id seen in only one frame of a pair scores 0
-            stats["ordering_adjacent_mask_iou_all_ids"] = P.adjacent_mask_iou_all_ids(masks, order, cams, gd, gv)
+            stats["ordering_adjacent_mask_iou_flow"] = MO.adjacent_mask_iou_flow(
+                [masks[v] for v in order], [images[v] for v in order])
+            if not scene.has_depth:
+                for k in strict_keys[:2]:
+                    stats[k] = None
+                    skipped[k] = "the scene has no GT depth to warp masks between views (see the _flow variant)"
+            else:
+                gd, gv = _gt_depths(scene, views, size)
+                cams = [W.camera_at(scene.cameras[v], size) for v in order]
+                zs = [np.where(gv[v], gd[v], 0.0) for v in order]
+                ms = [masks[v] for v in order]
+                stats["ordering_adjacent_mask_iou"] = MO.adjacent_mask_iou(ms, zs, cams)
+                stats["ordering_adjacent_mask_iou_strict"] = MO.adjacent_mask_iou_strict(ms, zs, cams)
         bar.update(1)
     else:
         skipped["masks"] = "not needed by the method"
@@ -292,6 +301,12 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
                        {"provider": fprov.id})
         cache_info["features"] = {"key": fkey, "hit": hit is not None}
         providers["features"] = fprov.id
+        if bool((cfg.get("features", {}) or {}).get("per_track", False)):
+            if per_frame_masks:
+                skipped["features.per_track"] = "per-frame masks have no tracks across views"
+            else:
+                mask_features = track_mean_features(mask_features)
+                providers["features"] = fprov.id + "+track-mean"
         bar.update(1)
     else:
         skipped["features"] = "not needed by the method"
@@ -300,6 +315,19 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
     return Priors(order=order, depth=depth, masks=masks if (need_masks or need_features) else None,
                   mask_features=mask_features, feature_provider=fprov, providers=providers,
                   skipped=skipped, stats=stats, cache=cache_info)
+
+
+def track_mean_features(features: Mapping[tuple[int, int], np.ndarray]) -> dict[tuple[int, int], np.ndarray]:
+    """Every (view, track) gets the renormalised mean of the track's features over its views."""
+    sums: dict[int, np.ndarray] = {}
+    for (_, t), f in features.items():
+        sums[t] = sums.get(t, 0.0) + np.asarray(f, dtype=np.float64)
+    means = {}
+    for t, f in sums.items():
+        n = float(np.linalg.norm(f))
+        # opposite unit vectors can cancel: keep the zero rather than divide by it
+        means[t] = (f / n if n > 1e-12 else f).astype(np.float32)
+    return {(v, t): means[t] for (v, t) in features}
 
 
 def default_cache_dir(runs_parent: str | os.PathLike) -> Path:

@@ -1,10 +1,16 @@
-"""Weight-free mask propagation along the pseudo-video, and the adjacent mask IoU metric.
+"""Weight-free mask propagation along the pseudo-video: the reference partition is carried.
 
 Each view comes with its own segments (int32 map, ids meaningful in that view only, -1 none).
-`propagate` walks the pseudo-video order: the first frame's segments become tracks 0..k-1; for
-every next frame the previous frame's track map is warped into it, the warped tracks are matched
-to the frame's segments by IoU with the Hungarian method (scipy's linear_sum_assignment), matched
-segments inherit the track id and unmatched ones start new tracks. Two warpers:
+`propagate` walks the pseudo-video order as a video segmenter does: the first frame's segments
+become tracks 0..k-1 (the reference partition); for every next frame the previous frame's track
+map is warped into it, and the warped (carried) tracks REPLACE the frame's own segments wherever
+the warp knows the answer, so the reference frame's cut of the scene (its merges, splits, leaks)
+travels along the video and the order of the frames changes the supervision. Where nothing is
+carried (disocclusions, failed flow, lost tracks), the frame's segments fill in: a segment that
+matches a carried track by IoU (Hungarian, scipy's linear_sum_assignment, at least `min_iou`,
+inside the known region) re-seeds that track; an unmatched one of at least `min_track_area`
+pixels starts a new track (a new object). A carried track smaller than `min_track_area` pixels
+is lost and re-seeded from the segments. Two warpers:
 
 - `FlowWarper` (``flow``): DIS optical flow (OpenCV) between consecutive frames, each pixel of the
   new frame looks up its source through the backward flow; a forward-backward consistency check
@@ -15,6 +21,7 @@ segments inherit the track id and unmatched ones start new tracks. Two warpers:
 
 IoU for matching is computed inside the known region of the warp only (pixels the warp could
 say something about), so an object that leaves the view does not lose its track for that alone.
+The adjacent-frame metrics that score the result are in `gsbench.metrics.ordering`.
 """
 from __future__ import annotations
 
@@ -29,6 +36,7 @@ from gsbench.priors import warp as W
 from gsbench.scene import Camera
 
 DEFAULT_MIN_IOU = 0.3
+MIN_TRACK_AREA_FRAC = 0.001
 FB_ALPHA = 0.01
 FB_BETA = 0.5
 MIN_FLOW_SIDE = 16
@@ -140,54 +148,35 @@ def match_segments(warped: np.ndarray, known: np.ndarray, segments: np.ndarray,
 
 
 def propagate(order: Sequence[int], segments: Mapping[int, np.ndarray], warper: Warper,
-              min_iou: float = DEFAULT_MIN_IOU, progress: bool = False) -> dict[int, np.ndarray]:
-    """Per-view track maps (int32, -1 none) with ids consistent along the pseudo-video `order`."""
+              min_iou: float = DEFAULT_MIN_IOU, min_track_area: int | None = None,
+              progress: bool = False) -> dict[int, np.ndarray]:
+    """Per-view track maps (int32, -1 none): the reference partition carried along `order`."""
     tracks: dict[int, np.ndarray] = {}
     next_id = 0
     prev = None
     for v in tqdm(order, desc="propagate masks", disable=not progress, leave=False):
         seg = np.asarray(segments[v]).astype(np.int32, copy=False)
+        area = int(min_track_area) if min_track_area is not None else max(1, int(MIN_TRACK_AREA_FRAC * seg.size))
+        out = np.full(seg.shape, -1, dtype=np.int32)
+        carried = np.zeros(seg.shape, dtype=bool)
         mapping: dict[int, int] = {}
         if prev is not None:
             warped, known = warper(prev, v, tracks[prev])
-            mapping = match_segments(warped, known, seg, min_iou)
-        out = np.full(seg.shape, -1, dtype=np.int32)
-        for s in np.unique(seg[seg >= 0]):
-            s = int(s)
-            if s not in mapping:
-                mapping[s] = next_id
+            carried = known & (warped >= 0)
+            ids, counts = np.unique(warped[carried], return_counts=True)
+            lost = ids[counts < area]
+            if len(lost):
+                carried &= ~np.isin(warped, lost)
+            out[carried] = warped[carried]
+            mapping = match_segments(np.where(carried, warped, -1), known, seg, min_iou)
+        fill = ~carried & (seg >= 0)
+        for s in np.unique(seg[fill]):
+            px = fill & (seg == s)
+            if int(s) in mapping:
+                out[px] = mapping[int(s)]
+            elif prev is None or int(px.sum()) >= area:
+                out[px] = next_id
                 next_id += 1
-            out[seg == s] = mapping[s]
         tracks[v] = out
         prev = v
     return tracks
-
-
-def adjacent_mask_iou_all_ids(tracks: Mapping[int, np.ndarray], order: Sequence[int], cameras: Mapping[int, Camera],
-                      depths: Mapping[int, np.ndarray], valids: Mapping[int, np.ndarray]) -> float | None:
-    """Mean adjacent mask IoU over all ids (a stricter diagnostic than gsbench.metrics.ordering's).
-
-    For each consecutive pair (a, b) the track map of a is z-buffer reprojected into b with a's
-    metric depth (and b into a), and for every track id seen in the shared region (pixels that
-    receive a reprojected point) in either map, the IoU of that id's pixels is taken; an id that
-    only one of the two frames has scores 0. The pair's value is the mean over ids, averaged over
-    both directions; the result is the mean over pairs that share a region with labels (None if
-    none does).
-    """
-    warper = ReprojectWarper(cameras, depths, valids)
-    values = []
-    for a, b in zip(order[:-1], order[1:]):
-        pair = []
-        for s, d in ((a, b), (b, a)):
-            warped, known = warper(s, d, tracks[s])
-            ids_w, ids_d, iou = iou_matrix(warped, tracks[d], known)
-            ids = np.union1d(ids_w, ids_d)
-            if len(ids) == 0:
-                continue
-            scores = np.zeros(len(ids))
-            common, iw, idd = np.intersect1d(ids_w, ids_d, return_indices=True)
-            scores[np.searchsorted(ids, common)] = iou[iw, idd]
-            pair.append(float(scores.mean()))
-        if pair:
-            values.append(float(np.mean(pair)))
-    return float(np.mean(values)) if values else None

@@ -1,0 +1,150 @@
+"""Write the pictures of docs/priors.md: the weight-free priors against GT on tabletop-small.
+
+Usage: python scripts/prior_figures.py [--out docs/img] [--scene DIR] [--stats]
+Without --scene, a tabletop-small scene is generated into a temporary folder (seed 0).
+--stats prints, instead of drawing, what the ordering changes at the default settings: the
+number of supervision-target pixels that differ between ordering=pose and ordering=random, and
+the adjacent-frame mask IoU of both (lenient, strict, flow).
+Each picture is a grid: one column per view, one row per setting; white lines are GT object
+edges, colours are mask ids (the same colour in two views means the same id only for tracks).
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from gsbench.priors import depth as D
+from gsbench.priors import masks as M
+from gsbench.priors import prepare_priors
+from gsbench.priors import segmenter as S
+from gsbench.priors import warp as W
+
+log = logging.getLogger(__name__)
+VIEW_INDEX = (4, 5, 6)        # three neighbouring training views
+SCALE = 2
+MARGIN = 110
+
+
+def colour(labels: np.ndarray) -> np.ndarray:
+    """Ids to colours (golden-ratio hues), -1 black; RGB uint8."""
+    ids = np.where(labels >= 0, labels, 0).astype(np.float64)
+    hsv = np.stack([((ids * 0.618034) % 1.0) * 179, np.full_like(ids, 200), np.full_like(ids, 230)], -1)
+    rgb = cv2.cvtColor(hsv.astype(np.uint8), cv2.COLOR_HSV2RGB)
+    rgb[labels < 0] = 0
+    return rgb
+
+
+def with_gt_edges(rgb: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    out = rgb.copy()
+    out[S.label_edges(gt)] = 255
+    return out
+
+
+def grid(rows: list[tuple[str, list[np.ndarray]]]) -> np.ndarray:
+    """Rows of (label, RGB cells), cells upscaled by SCALE (nearest), label in a left margin."""
+    lines = []
+    for label, cells in rows:
+        big = [cv2.resize(c, None, fx=SCALE, fy=SCALE, interpolation=cv2.INTER_NEAREST) for c in cells]
+        row = np.concatenate([np.pad(b, ((2, 2), (2, 2), (0, 0)), constant_values=255) for b in big], 1)
+        left = np.full((row.shape[0], MARGIN, 3), 255, np.uint8)
+        for k, part in enumerate(label.split("\n")):
+            cv2.putText(left, part, (4, 20 + 18 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+        lines.append(np.concatenate([left, row], 1))
+    return np.concatenate(lines, 0)
+
+
+def save(path: Path, img: np.ndarray) -> None:
+    if not cv2.imwrite(str(path), cv2.cvtColor(img, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, 9]):
+        raise OSError(f"{path}: could not write the picture")
+    log.info("wrote %s (%d KB)", path, path.stat().st_size // 1024)
+
+
+def ordering_stats(scene, size: tuple[int, int]) -> None:
+    """Print target pixels that differ between pose and random order, and the ordering metrics."""
+    views = list(scene.train_ids)
+    pri = {}
+    for mode in ("pose", "random"):
+        pri[mode] = prepare_priors(scene, {"ordering": mode}, views, size, None, False, True, True, progress=False)
+        s = pri[mode].stats
+        names = {"ordering_adjacent_mask_iou": "lenient", "ordering_adjacent_mask_iou_strict": "strict",
+                 "ordering_adjacent_mask_iou_flow": "flow"}
+        print(f"ordering={mode}: masks {pri[mode].providers['masks']}, tracks {s['mask_tracks']}, adjacent mask IoU "
+              + ", ".join(f"{n} {s[k]:.3f}" if s[k] is not None else f"{n} none" for k, n in names.items()))
+    differ = total = 0
+    for v in views:
+        a, b = pri["pose"], pri["random"]
+        ma, mb = a.masks[v], b.masks[v]
+        fa = np.zeros(ma.shape + (512,), np.float32)
+        fb = np.zeros_like(fa)
+        for m, f, p in ((ma, fa, a), (mb, fb, b)):
+            for t in np.unique(m[m >= 0]):
+                f[m == t] = p.mask_features[(v, int(t))]
+        differ += int((np.abs(fa - fb).max(-1) > 0).sum())
+        total += ma.size
+    print(f"supervision-target pixels that differ between pose and random: {differ} of {total}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="docs/img")
+    ap.add_argument("--scene", default=None)
+    ap.add_argument("--stats", action="store_true", help="print the ordering figures instead of drawing")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    from gsbench.datasets.loader import load_scene
+    from gsbench.datasets.synthetic import make_scene
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = load_scene(args.scene or make_scene("tabletop-small", Path(tmp) / "s", seed=0))
+        size = (scene.cameras[0].width, scene.cameras[0].height)
+        if args.stats:
+            ordering_stats(scene, size)
+            return
+        VIEWS = [sorted(scene.train_ids)[k] for k in VIEW_INDEX]
+        gt = {v: M.gt_instance_map(scene, v, size) for v in VIEWS}
+        img = {v: W.resize_image(np.asarray(scene.image(v), np.float32), size) for v in VIEWS}
+        z = {v: W.resize_nearest(np.asarray(scene.gt_depth(v), np.float32), size) for v in VIEWS}
+        u8 = {v: np.clip(np.rint(img[v] * 255), 0, 255).astype(np.uint8) for v in VIEWS}
+
+        def seg_row(label, knobs):
+            return (label, [with_gt_edges(colour(S.segment_view(gt[v], knobs, D.view_rng(0, v, "sim-masks"),
+                                                                  img[v], z[v])), gt[v]) for v in VIEWS])
+
+        rows = [("image", [u8[v] for v in VIEWS]), ("GT instances", [with_gt_edges(colour(gt[v]), gt[v]) for v in VIEWS])]
+        rows += [seg_row(f"severity {s}", S.SegmenterKnobs(*(5 * [float(s)]))) for s in range(4)]
+        save(out / "priors_severity.png", grid(rows))
+
+        rows = [("image", [u8[v] for v in VIEWS])]
+        for f in S.FAILURES:
+            rows.append(seg_row(f"{f} 3\n(others 0)", S.SegmenterKnobs(**{f: 3.0})))
+        save(out / "priors_failures.png", grid(rows))
+
+        views = list(scene.train_ids)
+        rows = [("image", [u8[v] for v in VIEWS])]
+        for label, mode, per_frame in (("per-frame", "pose", True), ("carried,\npose order", "pose", False),
+                                       ("carried,\nrandom order", "random", False)):
+            p = prepare_priors(scene, {"ordering": mode, "masks": {"provider": "simulated", "severity": 1}},
+                               views, size, None, False, True, False, per_frame_masks=per_frame, progress=False)
+            rows.append((label, [with_gt_edges(colour(p.masks[v]), gt[v]) for v in VIEWS]))
+        save(out / "priors_ordering.png", grid(rows))
+
+        rows = []
+        for s in range(4):
+            cells = []
+            for v in VIEWS:
+                d, ok = D.gt_disparity_prior(z[v], D.view_rng(0, v, "gt-depth"), float(s))
+                lo, hi = np.percentile(d[ok], [1, 99]) if ok.any() else (0.0, 1.0)
+                g = np.clip((d - lo) / max(hi - lo, 1e-9), 0, 1)
+                cells.append(cv2.applyColorMap(np.rint(g * 255).astype(np.uint8), cv2.COLORMAP_VIRIDIS)[..., ::-1])
+            rows.append((f"depth\ndistortion {s}", cells))
+        save(out / "priors_depth.png", grid(rows))
+
+
+if __name__ == "__main__":
+    main()
