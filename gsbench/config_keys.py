@@ -135,6 +135,8 @@ RULES: dict[str, Rule] = {
     "priors.depth.noise.severity": one_of(*NOISE_SEVERITIES),
     "priors.masks.provider": one_of(*MASK_PROVIDERS),
     "priors.masks.severity": at_least(0),
+    **{f"priors.masks.failures.{k}": at_least(0, kind="float") for k in ("merge", "split", "miss", "leak", "texture")},
+    "priors.depth.distortion": at_least(0),
     "priors.masks.propagator": one_of(*PROPAGATORS),
     "priors.masks.checkpoint": Rule(kind="str"),
     "priors.masks.model_config": Rule(kind="str"),
@@ -142,6 +144,7 @@ RULES: dict[str, Rule] = {
     "priors.features.provider": one_of(*FEATURE_PROVIDERS),
     "priors.features.checkpoint": Rule(kind="str"),
     "priors.features.noise": at_least(0),
+    "priors.features.context": unit(),
     # GaussianDS
     "gaussiands.latent_dim": at_least(1),
     "gaussiands.autoencoder.epochs": at_least(0),

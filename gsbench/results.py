@@ -32,7 +32,8 @@ IMAGE_METRICS = ("psnr", "ssim", "lpips", "fps")
 SEG_BASES = {"3dovs": ("miou", "mbiou", "pixel_acc", "pixel_acc_labelled"), "lerf": ("miou", "loc_acc")}
 MASK_FOLDER_METRICS = ("mbiou_lerf",)
 REMOVAL_METRICS = ("removal_residual", "removal_psnr_outside")
-ORDERING_METRICS = ("ordering_adjacent_distance", "ordering_adjacent_mask_iou")
+ORDERING_METRICS = ("ordering_adjacent_distance", "ordering_adjacent_mask_iou", "ordering_adjacent_mask_iou_strict",
+                    "ordering_adjacent_mask_iou_flow")
 TIMING_NAMES = ("train_s", "eval_s", "render_ms")
 MEMORY_NAMES = ("peak_rss_mb", "train_peak_rss_mb", "peak_cuda_mb", "train_peak_cuda_mb", "eval_peak_cuda_mb")
 

@@ -58,8 +58,9 @@ from __future__ import annotations
 from .image import PSNR_IMPL, SSIM_IMPL, psnr, quantize_uint8, ssim, ssim_map
 from .lerf import (CANONICAL_NEGATIVES, LERF_IMPL, LerfPair, LerfSceneResult, box_mean, evaluate_lerf_scene,
                    lerf_blend, lerf_localization, lerf_mask, lerf_relevancy, majority_smooth, select_level)
-from .ordering import (ORDERING_DISTANCE_IMPL, ORDERING_MASK_IOU_IMPL, adjacent_mask_iou,
-                       adjacent_mask_iou_pairs, mean_adjacent_distance)
+from .ordering import (ORDERING_DISTANCE_IMPL, ORDERING_MASK_IOU_FLOW_IMPL, ORDERING_MASK_IOU_IMPL,
+                       ORDERING_MASK_IOU_STRICT_IMPL, adjacent_mask_iou, adjacent_mask_iou_flow,
+                       adjacent_mask_iou_pairs, adjacent_mask_iou_strict, mean_adjacent_distance)
 from ._common import NEAREST_IMPL, resize_nearest
 from .ovs3d import (OVS3D_IMPL, PIXEL_ACC_IMPL, PIXEL_ACC_RULES, Ovs3dSceneResult, Ovs3dView, evaluate_ovs3d_scene,
                     ovs3d_predict, ovs3d_view_metrics, pixel_accuracy)
@@ -92,6 +93,8 @@ METRIC_IMPL: dict[str, str] = {
     "mbiou_3dovs_decode": OVS3D_IMPL + "+" + BIOU_IMPL,
     "ordering_adjacent_distance": ORDERING_DISTANCE_IMPL,
     "ordering_adjacent_mask_iou": ORDERING_MASK_IOU_IMPL,
+    "ordering_adjacent_mask_iou_strict": ORDERING_MASK_IOU_STRICT_IMPL,
+    "ordering_adjacent_mask_iou_flow": ORDERING_MASK_IOU_FLOW_IMPL,
 }
 
 __all__ = [
@@ -102,6 +105,7 @@ __all__ = [
     "CANONICAL_NEGATIVES", "ovs3d_predict", "resize_nearest", "ovs3d_view_metrics", "evaluate_ovs3d_scene",
     "Ovs3dView", "Ovs3dSceneResult", "mean_adjacent_distance", "adjacent_mask_iou", "adjacent_mask_iou_pairs",
     "time_fps", "PSNR_IMPL", "SSIM_IMPL", "LERF_IMPL", "OVS3D_IMPL", "BIOU_IMPL", "IOU_IMPL", "FPS_IMPL",
-    "ORDERING_DISTANCE_IMPL", "ORDERING_MASK_IOU_IMPL", "NEAREST_IMPL", "PIXEL_ACC_IMPL", "PIXEL_ACC_RULES",
+    "ORDERING_DISTANCE_IMPL", "ORDERING_MASK_IOU_IMPL", "ORDERING_MASK_IOU_STRICT_IMPL", "ORDERING_MASK_IOU_FLOW_IMPL",
+    "adjacent_mask_iou_strict", "adjacent_mask_iou_flow", "NEAREST_IMPL", "PIXEL_ACC_IMPL", "PIXEL_ACC_RULES",
     "pixel_accuracy", "LPIPS_RANGES",
 ]

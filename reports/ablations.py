@@ -282,7 +282,8 @@ def ordering_table(res: Results) -> list[Table]:
         res, "ordering", "ordering", "Pseudo-video ordering",
         "Ordering strategies for the pseudo-video: mean adjacent camera-centre distance and mean "
         "adjacent mask IoU of the propagated masks.",
-        [AX_ORDERING], ["Ordering strategy"], ["ordering_adjacent_distance", "ordering_adjacent_mask_iou"])
+        [AX_ORDERING], ["Ordering strategy"], ["ordering_adjacent_distance", "ordering_adjacent_mask_iou_strict",
+                                                     "ordering_adjacent_mask_iou_flow"])
 
 
 def depth_formulation_table(res: Results) -> list[Table]:

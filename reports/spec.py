@@ -40,7 +40,9 @@ METRICS: dict[str, MetricSpec] = {
     "removal_residual": MetricSpec("Residual object px (%)", "Residual object px (\\%)", "lower", 100.0, 2),
     "removal_psnr_outside": MetricSpec("PSNR outside (dB)", "PSNR outside (dB)", "higher", 1.0, 2),
     "ordering_adjacent_distance": MetricSpec("Adjacent pose distance", "Adjacent Pose Distance", "lower", 1.0, 3),
-    "ordering_adjacent_mask_iou": _pct("Adjacent mask IoU"),
+    "ordering_adjacent_mask_iou": _pct("Adjacent mask IoU (shared ids)"),
+    "ordering_adjacent_mask_iou_strict": _pct("Adjacent mask IoU (strict)"),
+    "ordering_adjacent_mask_iou_flow": _pct("Adjacent mask IoU (strict, flow)"),
     # timings / memory (rows of the long table with source "timings" / "memory")
     "train_s": MetricSpec("Training time (min)", "Training Time (min)", "lower", 1.0 / 60.0, 2),
     "eval_s": MetricSpec("Eval time (s)", "Eval Time (s)", "lower", 1.0, 1),

@@ -85,9 +85,9 @@ def test_one_seed_is_inconclusive(tmp_path: Path):
 def test_missing_row_is_not_run(tmp_path: Path):
     for s in (0, 1):
         write_run(tmp_path, f"o/pose{s}", method="gaussiands", scene="bench", seed=s, study="ordering",
-                  grid={"priors.ordering": "pose"}, metrics={"ordering_adjacent_mask_iou": 0.5 + 0.01 * s})
+                  grid={"priors.ordering": "pose"}, metrics={"ordering_adjacent_mask_iou_strict": 0.5 + 0.01 * s})
         write_run(tmp_path, f"o/random{s}", method="gaussiands", scene="bench", seed=s, study="ordering",
-                  grid={"priors.ordering": "random"}, metrics={"ordering_adjacent_mask_iou": 0.3 + 0.02 * s})
+                  grid={"priors.ordering": "random"}, metrics={"ordering_adjacent_mask_iou_strict": 0.3 + 0.02 * s})
     got = rows_by_key(Results(collect(tmp_path)))
     assert got["ordering_pose_random"][1] == REPRODUCED  # +20, +19 points
     assert got["ordering_pose_filename"] == ("n/a (reference row not run or not evaluated)", NOT_RUN)

@@ -31,7 +31,9 @@ def _ordering(run_dir: Path) -> Block:
     summary = _read_optional(run_dir / "train_summary.json")
     stats = (summary.get("info") or {}).get("priors_stats") or summary.get("priors_stats") or {}
     impls = {"ordering_adjacent_distance": MO.ORDERING_DISTANCE_IMPL,
-             "ordering_adjacent_mask_iou": MO.ORDERING_MASK_IOU_IMPL}
+             "ordering_adjacent_mask_iou": MO.ORDERING_MASK_IOU_IMPL,
+             "ordering_adjacent_mask_iou_strict": MO.ORDERING_MASK_IOU_STRICT_IMPL,
+             "ordering_adjacent_mask_iou_flow": MO.ORDERING_MASK_IOU_FLOW_IMPL}
     for k in ORDERING_METRICS:
         out.put(k, stats.get(k), impls.get(k),
                 "not in the run's priors stats (no masks/ordering prior for this method or scene)")
