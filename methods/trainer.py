@@ -12,6 +12,15 @@ holds parameters, Adam state, densification statistics, RNG states, step and ela
 `train_log.jsonl` is cut back to the checkpoint's step so the log has no duplicated steps.
 A non-finite loss or parameter writes status "nonfinite" and raises NonFiniteError; the last good
 checkpoint is kept.
+
+Device: the field, Adam state, densification statistics and background live on the device of the
+views' images (methods.device.resolve_device). A step does no host work: loss terms, skip counts
+and a first-non-finite-step flag stay on the device and are read only at log, eval, checkpoint and
+densification steps (the loop's only synchronisation points), so a non-finite loss is reported
+with its exact step at the next such point and no checkpoint is ever written after it.
+SH colours (N, K, 3) are trained as two Adam groups, the DC band (`train.lr.color`) and the rest
+(`colors_rest`, times `train.lr.color_rest_factor`), with one band more every
+`train.sh_increase_every` steps (3DGS).
 """
 from __future__ import annotations
 
