@@ -16,6 +16,8 @@ Mapping of our field and camera to gsplat's arguments (one call renders everythi
 - Outputs: rgb = channels[:3], features = channels[3:-1], depth = channels[-1], alpha =
   render_alphas. `means2d` is gsplat's projected means (its `.grad` is filled after backward via
   a hook, for densification); `radii` is gsplat's per-axis radii (0 = culled).
+info["n_visible"] is a 0-dim device tensor here (int() it when needed): reading it would synchronise
+with the GPU, and training renders every step without a host synchronisation.
 gsplat computes in float32; a float64 field is cast (gradients flow back through the cast) and the
 outputs are cast back. gsplat's screen extent and tile tests are its own; they only differ from
 the shared rules where alpha < 1/255, so results match the `torch` backend to float32 rounding
@@ -120,7 +122,7 @@ def render_gsplat(field: GaussianField, camera: Camera, background: Optional[tor
     radii = radii.to(torch.int64)
     return RenderOutput(rgb=rgb, depth=depth, features=feats, alpha=alpha, backend="gsplat",
                         means2d=_means2d_with_grad(meta["means2d"]), radii=radii,
-                        info={"n_gaussians": field.num, "n_visible": int((radii > 0).all(-1).sum()),
+                        info={"n_gaussians": field.num, "n_visible": (radii > 0).all(-1).sum(),
                               "width": camera.width, "height": camera.height,
                               "dtype": str(field.means.dtype).replace("torch.", ""),
                               "device": str(field.means.device),
