@@ -6,7 +6,8 @@
 For each device (cpu always; cuda where available) and each size N@WxH it prints one Markdown row per
 method, all in the same process:
 - reference: a bare training step written directly against the renderer: render RGB + 3 feature
-  channels + depth of N random Gaussians, L1 against fixed targets, backward, Adam step. On CUDA it
+  channels + depth of the same N initial Gaussians and views as the harness rows, L1 against the
+  image (and zero features/depth), backward, Adam step. On CUDA it
   calls gsplat.rasterization itself; on the CPU it calls gsbench.render with the `cpu` backend (the
   backend the harness uses there);
 - vanilla, gaussiands: `gsbench.runs.train_run` on a generated tabletop-small scene at WxH with
@@ -32,21 +33,6 @@ import torch
 
 from gsbench.gaussians import GaussianField
 from gsbench.render import render
-from gsbench.scene import Camera
-
-
-def _random_field(n: int, device: torch.device, feats: int = 3, seed: int = 0) -> GaussianField:
-    g = torch.Generator().manual_seed(seed)
-    means = torch.rand(n, 3, generator=g) * torch.tensor([2.0, 1.5, 1.0]) - torch.tensor([1.0, 0.75, -2.0])
-    f = GaussianField(means, torch.full((n, 3), -3.5), torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1),
-                      torch.zeros(n), torch.rand(n, 3, generator=g), torch.rand(n, feats, generator=g))
-    return f.to(device=device)
-
-
-def _camera(w: int, h: int) -> Camera:
-    import numpy as np
-    f = 0.9 * w
-    return Camera(np.array([[f, 0, w / 2], [0, f, h / 2], [0, 0, 1.0]]), np.eye(4), w, h)
 
 
 def _sync(device: torch.device) -> None:
@@ -54,61 +40,73 @@ def _sync(device: torch.device) -> None:
         torch.cuda.synchronize(device)
 
 
-def reference_its(n: int, w: int, h: int, device: torch.device, iters: int) -> tuple[float, str]:
-    """it/s of a bare step (render RGB + 3 features + depth, L1, backward, Adam)."""
-    fld = _random_field(n, device)
-    params = {k: torch.nn.Parameter(v.clone()) for k, v in fld.tensors().items() if v is not None}
+def _scene(root: Path, w: int, h: int) -> Path:
+    from gsbench.datasets.synthetic import make_scene
+    scene = root / f"scene_{w}x{h}"
+    if not scene.exists():
+        make_scene("tabletop-small", scene, seed=0, views=10, resolution=(w, h))
+    return scene
+
+
+def _config(method: str, n: int, w: int, device: torch.device, iters: int, log_every: int, root: Path) -> dict:
+    from gsbench.config import load_config
+    return load_config(method, "cpu-small", [
+        f"train.device={device}", "backend=auto", f"train.iterations={iters}", f"train.max_width={w}",
+        "train.densify.enabled=false", "train.init.mode=random", f"train.init.num_random={n}",
+        "train.eval_every=0", "train.checkpoint_every=0", f"train.log_every={log_every}",
+        "gaussiands.autoencoder.epochs=20", f"priors.cache_dir={root / 'cache'}"])
+
+
+def reference_its(n: int, w: int, h: int, device: torch.device, iters: int, root: Path) -> tuple[float, str]:
+    """it/s of a bare step (render RGB + 3 features + depth, L1, backward, Adam) on the same scene,
+    views and initial Gaussians as the harness rows, so the rasterisation work is the same."""
+    from gsbench.datasets import load_scene
+    from gsbench.methods.base import load_views, scene_init
+    cfg = _config("gaussiands", n, w, device, iters, iters, root)
+    scene = load_scene(_scene(root, w, h))
+    views, _ = load_views(scene, cfg, device=device)
+    fld, _ = scene_init(scene, cfg, 3)
+    params = {k: torch.nn.Parameter(v.to(device).clone()) for k, v in fld.tensors().items() if v is not None}
     opt = torch.optim.Adam(params.values(), lr=1e-3, eps=1e-15)
-    cam = _camera(w, h)
-    target = torch.rand(h, w, 7, device=device)
+    ids = sorted(views.cameras)
+    targets = {i: torch.cat([views.images[i], torch.zeros(h, w, 4, device=device)], -1) for i in ids}
     if device.type == "cuda":
         import gsplat
         from gsbench.render.gsplat_backend import gsplat_arguments
         label = "bare gsplat step"
 
-        def step() -> None:
-            f = GaussianField(**params)
-            kw = gsplat_arguments(f, cam)
-            img, alpha, _ = gsplat.rasterization(**kw)
-            loss = (img[0] - target).abs().mean()
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
+        def pred_of(cam):
+            img, _, _ = gsplat.rasterization(**gsplat_arguments(GaussianField(**params), cam))
+            return img[0]
     else:
         label = "bare cpu-backend step"
 
-        def step() -> None:
+        def pred_of(cam):
             out = render(GaussianField(**params), cam, backend="cpu")
-            pred = torch.cat([out.rgb, out.features, out.depth[..., None]], -1)
-            loss = (pred - target).abs().mean()
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-    for _ in range(max(3, iters // 10)):
-        step()
+            return torch.cat([out.rgb, out.features, out.depth[..., None]], -1)
+
+    def step(k: int) -> None:
+        i = ids[k % len(ids)]
+        loss = (pred_of(views.cameras[i]) - targets[i]).abs().mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+    for k in range(max(3, iters // 10)):
+        step(k)
     _sync(device)
     t0 = time.perf_counter()
-    for _ in range(iters):
-        step()
+    for k in range(iters):
+        step(k)
     _sync(device)
     return iters / (time.perf_counter() - t0), label
 
 
 def harness_its(method: str, n: int, w: int, h: int, device: torch.device, iters: int, root: Path) -> float:
-    from gsbench.config import load_config
-    from gsbench.datasets.synthetic import make_scene
     from gsbench.runs import train_run
     from gsbench.store import read_jsonl
-    scene = root / f"scene_{w}x{h}"
-    if not scene.exists():
-        make_scene("tabletop-small", scene, seed=0, views=10, resolution=(w, h))
     log_every = max(5, iters // 4)
-    cfg = load_config(method, "cpu-small", [
-        f"train.device={device}", "backend=auto", f"train.iterations={iters + log_every}", f"train.max_width={w}",
-        "train.densify.enabled=false", "train.init.mode=random", f"train.init.num_random={n}",
-        "train.eval_every=0", "train.checkpoint_every=0", f"train.log_every={log_every}",
-        "gaussiands.autoencoder.epochs=20", f"priors.cache_dir={root / 'cache'}"])
-    run = train_run(cfg, scene, root / f"{method}_{device.type}_{n}_{w}x{h}", progress=False)
+    cfg = _config(method, n, w, device, iters + log_every, log_every, root)
+    run = train_run(cfg, _scene(root, w, h), root / f"{method}_{device.type}_{n}_{w}x{h}", progress=False)
     log = [r for r in read_jsonl(run / "train_log.jsonl") if "loss" in r]
     first, last = log[0], log[-1]
     return (last["step"] - first["step"]) / max(1e-9, last["wall_s"] - first["wall_s"])
@@ -143,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
         root = Path(tmp)
         for dev in devices:
             for n, w, h in sizes:
-                ref, label = reference_its(n, w, h, dev, a.iters)
+                ref, label = reference_its(n, w, h, dev, a.iters, root)
                 r = {"device": str(dev), "n": n, "width": w, "height": h}
                 rows.append(dict(r, row=label, its=ref))
                 print(f"| {dev} | {n} | {w}x{h} | {label} | {ref:.1f} | 1.00 | |", flush=True)
