@@ -171,6 +171,20 @@ class DepthTerm:
     ok: torch.Tensor
     s: torch.Tensor
     t: torch.Tensor
+    n_valid: Optional[torch.Tensor] = None
+    min_valid: int = 10
+
+    @property
+    def reason(self) -> str:
+        """Why the term was skipped ('' when not): for diagnostics and tests; reading it synchronises."""
+        if self.loss is None:
+            return "formulation none"
+        if bool(self.ok):
+            return ""
+        n = int(self.n_valid) if self.n_valid is not None else 0
+        if n < max(2, self.min_valid):
+            return f"{n} valid pixels (< {self.min_valid})"
+        return "prior is (near) constant on the valid pixels"
 
 
 def normalised_depth(depth: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
@@ -234,7 +248,7 @@ def depth_loss(formulation: str, depth: torch.Tensor, prior: np.ndarray | torch.
         rstd = torch.sqrt((rc * rc).sum() / nn_ + 1e-20)
         loss = 1.0 - (rc * pc).sum() / nn_ / (rstd * pstd)
     loss = torch.where(ok, loss, torch.zeros_like(loss))
-    return DepthTerm(loss, ok, s, t)
+    return DepthTerm(loss, ok, s, t, n, int(min_valid))
 
 
 def _scale_shift_masked(x: torch.Tensor, y: torch.Tensor, m: torch.Tensor, n: torch.Tensor):
