@@ -86,3 +86,39 @@ def test_frustum_points_lie_inside_the_bounds():
     assert abs(np.mean(z < 3.2) - 0.5) < 0.05
     with pytest.raises(ValueError, match="near"):
         frustum_points(cams, 5.0, 1.0, 10, seed=0)
+
+
+def test_auto_init_mode_per_layout():
+    from types import SimpleNamespace
+
+    from gsbench.methods.base import init_mode
+    cfg = {"train": {"init": {"mode": "auto"}}}
+    bounds = {"near": 1.0, "far": 5.0}
+    assert init_mode(SimpleNamespace(has_points=True, layout="llff", meta=bounds), cfg) == "points"
+    assert init_mode(SimpleNamespace(has_points=False, layout="llff", meta=bounds), cfg) == "frustum"
+    assert init_mode(SimpleNamespace(has_points=False, layout="3dovs", meta=bounds), cfg) == "frustum"
+    assert init_mode(SimpleNamespace(has_points=False, layout="llff", meta={}), cfg) == "random"
+    assert init_mode(SimpleNamespace(has_points=False, layout="nerf", meta=bounds), cfg) == "random"
+    assert init_mode(SimpleNamespace(has_points=False, layout="llff", meta=bounds),
+                     {"train": {"init": {"mode": "random"}}}) == "random"
+
+
+def test_frustum_init_on_a_forward_facing_scene_without_points(tmp_path):
+    """A generated scene read as LLFF (poses_bounds.npy, no sparse/): the initial Gaussians lie between
+    its near and far bounds in front of the training cameras."""
+    from gsbench.datasets import load_scene
+    from gsbench.datasets.synthetic import make_scene
+    from gsbench.methods.base import scene_init
+    root = make_scene("tabletop-small", tmp_path / "s", seed=0, views=6, resolution=(32, 24))
+    if not (root / "poses_bounds.npy").is_file():
+        pytest.skip("the generator wrote no poses_bounds.npy for this preset")
+    sc = load_scene(root, layout="llff")
+    assert not sc.has_points and "near" in sc.meta
+    cfg = load_config("vanilla", "cpu-small", ["train.init.num_random=500"])
+    fld, how = scene_init(sc, cfg, 0)
+    assert how.startswith("frustum") and fld.num == 500
+    xyz = fld.means.numpy()
+    zs = np.stack([sc.cameras[i].project(xyz)[1] for i in sc.train_ids])
+    near, far = sc.meta["near"], sc.meta["far"]
+    assert (zs > 0).all()                                          # in front of every training camera
+    assert ((zs >= near * (1 - 1e-6)) & (zs <= far * (1 + 1e-6))).any(0).all()   # within bounds of its camera
