@@ -75,3 +75,23 @@ def test_cpu_and_cuda_runs_reach_similar_psnr(tmp_path):
         assert s["info"]["device"].startswith(dev)
         ps[dev] = s["last_eval"]["psnr"]
     assert abs(ps["cpu"] - ps["cuda"]) < 0.5, ps
+
+
+def test_camera_device_tensors_are_cached_per_device_and_never_pickled():
+    import pickle
+
+    import numpy as np
+
+    from gsbench.scene import Camera
+    w2c = np.eye(4)
+    w2c[:3, 3] = [0.5, -1.0, 2.0]
+    cam = Camera(np.array([[50.0, 0, 16], [0, 50.0, 12], [0, 0, 1]]), w2c, 32, 24)
+    K, v, c = cam.device_tensors("cpu")
+    assert cam.device_tensors("cpu")[0] is K                     # second call: no new copy
+    assert torch.equal(K, torch.tensor(cam.K, dtype=torch.float32)) and torch.equal(v, torch.tensor(w2c, dtype=torch.float32))
+    assert np.allclose(c.numpy(), cam.center, atol=1e-6)
+    assert cam.device_tensors("cpu", torch.float64)[0].dtype == torch.float64
+    small = cam.resized(16, 12)
+    assert float(small.device_tensors("cpu")[0][0, 0]) == 25.0   # its own K, not the parent's cache
+    back = pickle.loads(pickle.dumps(cam))
+    assert back._tensor_cache == {} and back == cam

@@ -51,7 +51,8 @@ def gsplat_arguments(field: GaussianField, camera: Camera) -> dict:
     """Keyword arguments of gsplat.rasterization for one camera (device of the field, float32)."""
     device = field.means.device
     f32 = torch.float32
-    cam_center = torch.as_tensor(camera.center, device=device, dtype=field.means.dtype)
+    K, w2c, _ = camera.device_tensors(device, f32)
+    cam_center = camera.device_tensors(device, field.means.dtype)[2]
     colors = field.rgb(cam_center)
     if field.features is not None:
         colors = torch.cat([colors, field.features], dim=1)
@@ -61,8 +62,8 @@ def gsplat_arguments(field: GaussianField, camera: Camera) -> dict:
         scales=field.scales.to(f32),
         opacities=field.opacity.to(f32),
         colors=colors.to(f32),
-        viewmats=torch.as_tensor(camera.world_to_camera, device=device, dtype=f32)[None],
-        Ks=torch.as_tensor(camera.K, device=device, dtype=f32)[None],
+        viewmats=w2c[None],
+        Ks=K[None],
         width=camera.width,
         height=camera.height,
         near_plane=rules.NEAR_PLANE,
