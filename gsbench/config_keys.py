@@ -98,6 +98,8 @@ RULES: dict[str, Rule] = {
     "train.holdout": one_of(*HOLDOUTS),
     "train.max_width": at_least(1, kind="int", integer=True),
     "train.sh_degree": Rule(low=0, high=3),
+    "train.sh_increase_every": at_least(0),
+    "train.lr.color_rest_factor": positive(),
     "train.lambda_dssim": unit(),
     "train.init.mode": one_of(*INIT_MODES),
     "train.init.num_random": at_least(1),
@@ -159,7 +161,7 @@ RULES: dict[str, Rule] = {
     "gaussiands.edges.canny_high": at_least(0),
     "gaussiands.edges.dilate": at_least(0),
     "gaussiands.min_valid_pixels": at_least(1),
-    "twostage.semantic_iterations": at_least(0),
+    "twostage.semantic_iterations": at_least(1, kind="int", integer=True),  # null = train.iterations
     # queries and evaluation
     "query.mode": one_of(*QUERY_MODES),
     "removal.threshold": Rule(low=-1.0, high=1.0),

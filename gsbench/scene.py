@@ -41,6 +41,24 @@ class Camera:
         self.height = int(self.height)
         if self.width < 1 or self.height < 1:
             raise ValueError(f"Camera size must be positive, got {self.width}x{self.height}")
+        self._tensor_cache: dict = {}
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state["_tensor_cache"] = {}          # device tensors are never pickled
+        return state
+
+    def device_tensors(self, device, dtype=torch.float32) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(K, world_to_camera, centre) as tensors on `device`, copied once per device and dtype: a
+        training step on CUDA then sends nothing from the host. Cameras are not mutated in place
+        (resized/scaled return new ones), so the cache cannot go stale."""
+        key = (str(device), dtype)
+        hit = self._tensor_cache.get(key)
+        if hit is None:
+            hit = tuple(torch.as_tensor(np.asarray(a), dtype=dtype).to(device)
+                        for a in (self.K, self.world_to_camera, self.center))
+            self._tensor_cache[key] = hit
+        return hit
 
     @property
     def fx(self) -> float:

@@ -17,6 +17,7 @@ the two. Methods without semantics return None from both.
 from __future__ import annotations
 
 import copy
+import logging
 from pathlib import Path
 from typing import Optional
 
@@ -70,6 +71,11 @@ class Method:
     def backend(self) -> str:
         return self._backend
 
+    @property
+    def device(self) -> torch.device:
+        """Where the field lives; evaluation renders (and synchronises timings) on this device."""
+        return self._require_field().means.device
+
     def provider_ids(self) -> dict:
         return dict(self.providers)
 
@@ -80,7 +86,7 @@ class Method:
 
     def _background(self) -> torch.Tensor:
         bg = (self.config.get("train", {}) or {}).get("background") or [0.0, 0.0, 0.0]
-        return torch.tensor(bg, dtype=torch.float32)
+        return torch.tensor(bg, dtype=torch.float32, device=self.device)
 
     def render(self, camera: Camera) -> RenderOutput:
         """RGB, depth, alpha and the rendered latent S_hat (features, or None) of a camera."""
@@ -113,7 +119,7 @@ class Method:
         _check_mode(mode)
         if not self.has_semantics:
             return None
-        t = torch.as_tensor(np.asarray(self.feature_provider().encode_text(list(texts)), dtype=np.float32))
+        t = torch.as_tensor(np.asarray(self.feature_provider().encode_text(list(texts)), dtype=np.float32), device=self.device)
         if mode == "decode":
             return _unit(t)
         with torch.no_grad():
@@ -143,14 +149,18 @@ class Method:
         save_torch_atomic(Path(path), self.state())
 
     @classmethod
-    def load(cls, path: str | Path) -> "Method":
+    def load(cls, path: str | Path, device: str | torch.device | None = None) -> "Method":
+        """Load a saved model onto `device` (None = CUDA when available, else the CPU); a saved render
+        backend that cannot run there is re-resolved as `auto` for that device (logged)."""
+        from gsbench.methods.device import resolve_backend_for, resolve_device
+        dev = torch.device(device) if device is not None else resolve_device({"train": {"device": "auto"}})
         st = load_torch(Path(path))
         if not isinstance(st, dict) or "field" not in st:
             raise InputError(f"{path}: not a gsbench model file")
         from gsbench.methods import get_method
         klass = get_method(st["method"]) if cls is Method else cls
         m = klass()
-        m.field = GaussianField.from_state_dict(st["field"])
+        m.field = GaussianField.from_state_dict(st["field"]).to(device=dev)
         m.config = st["config"]
         if st.get("autoencoder"):
             c = st["autoencoder"]["config"]
@@ -159,9 +169,14 @@ class Method:
             ae.eval()
             for p in ae.parameters():
                 p.requires_grad_(False)
-            m.autoencoder = ae
+            m.autoencoder = ae.to(dev)
         m.providers = st.get("providers", m.providers)
-        m._backend = st.get("backend", "torch")
+        saved = st.get("backend", "torch")
+        try:
+            m._backend = resolve_backend_for(saved, dev)
+        except InputError:
+            m._backend = resolve_backend_for("auto", dev)
+            logging.getLogger(__name__).info("%s: saved backend %s cannot render on %s; using %s", path, saved, dev, m._backend)
         m.info = st.get("info", {})
         return m
 
@@ -181,8 +196,10 @@ def training_size(camera: Camera, max_width: Optional[int]) -> tuple[int, int]:
     return w, h
 
 
-def load_views(scene, config: dict, progress: bool = False) -> tuple[TrainViews, tuple[int, int]]:
-    """Train cameras/images at the training resolution, plus the first `eval_views` test views."""
+def load_views(scene, config: dict, progress: bool = False,
+               device: torch.device | str = "cpu") -> tuple[TrainViews, tuple[int, int]]:
+    """Train cameras/images at the training resolution (images on `device`, copied once), plus the
+    first `eval_views` test views."""
     from gsbench.datasets.splits import split_ids
     tcfg = config["train"]
     train_ids, test_ids = split_ids(scene, config)
@@ -197,7 +214,7 @@ def load_views(scene, config: dict, progress: bool = False) -> tuple[TrainViews,
         img = img[..., :3]
         if img.shape[1] != W or img.shape[0] != H:
             img = cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA)
-        return scene.cameras[i].resized(W, H), torch.from_numpy(np.clip(img, 0.0, 1.0).copy())
+        return scene.cameras[i].resized(W, H), torch.from_numpy(np.clip(img, 0.0, 1.0).copy()).to(device)
 
     views = TrainViews({}, {})
     for i in train_ids:
@@ -211,17 +228,65 @@ def load_views(scene, config: dict, progress: bool = False) -> tuple[TrainViews,
     return views, (W, H)
 
 
+FORWARD_FACING_LAYOUTS = ("llff", "3dovs")
+
+
+def frustum_points(cameras: list[Camera], near: float, far: float, n: int, seed: int) -> np.ndarray:
+    """n points uniform over the pixels of the given cameras, at depths uniform in inverse depth
+    between `near` and `far` (forward-facing captures: the volume the cameras actually see)."""
+    if not (np.isfinite(near) and np.isfinite(far)) or near <= 0 or far <= near:
+        raise ValueError(f"frustum init needs 0 < near < far, got near={near}, far={far}")
+    rng = np.random.default_rng(seed)
+    ci = rng.integers(0, len(cameras), size=n)
+    out = np.empty((n, 3))
+    inv = 1.0 / near + rng.random(n) * (1.0 / far - 1.0 / near)
+    z = 1.0 / inv
+    for k, cam in enumerate(cameras):
+        sel = np.nonzero(ci == k)[0]
+        if sel.size == 0:
+            continue
+        u = rng.random(sel.size) * cam.width
+        v = rng.random(sel.size) * cam.height
+        pc = np.stack([(u - cam.cx) / cam.fx * z[sel], (v - cam.cy) / cam.fy * z[sel], z[sel]], axis=1)
+        c2w = cam.camera_to_world
+        out[sel] = pc @ c2w[:3, :3].T + c2w[:3, 3]
+    return out
+
+
+def init_mode(scene, config: dict) -> str:
+    """The concrete init mode: 'auto' = sparse points when the scene has them, else the near/far
+    frusta for forward-facing layouts that know their bounds, else a random cube."""
+    mode = config["train"]["init"]["mode"]
+    if mode != "auto":
+        return mode
+    if scene.has_points:
+        return "points"
+    meta = getattr(scene, "meta", {}) or {}
+    if getattr(scene, "layout", "") in FORWARD_FACING_LAYOUTS and "near" in meta and "far" in meta:
+        return "frustum"
+    return "random"
+
+
 def scene_init(scene, config: dict, feature_dim: int):
-    """Initial field from the config's init mode ('auto' = points when the scene has them)."""
+    """Initial field from the config's init mode (see `init_mode`); returns (field, how)."""
     from gsbench.methods.trainer import init_field
     icfg = config["train"]["init"]
-    mode = icfg["mode"]
-    if mode == "auto":
-        mode = "points" if scene.has_points else "random"
+    mode = init_mode(scene, config)
     centres = np.stack([c.center for c in scene.cameras])
     centre = centres.mean(0)
     half = float(scene.extent or 1.0) * float(icfg.get("random_scale", 1.0))
     pc = getattr(scene, "point_colors", None)
-    return init_field(scene.points, pc, mode, int(icfg["num_random"]), centre, half,
-                      int(config["train"]["sh_degree"]), feature_dim, int(config["seed"]),
-                      icfg.get("max_points"))
+    sh = int(config["train"]["sh_degree"])
+    if mode == "frustum":
+        meta = getattr(scene, "meta", {}) or {}
+        if "near" not in meta or "far" not in meta:
+            raise ValueError(f"{scene.path}: train.init.mode=frustum needs the scene's near/far bounds (LLFF poses_bounds)")
+        near, far = float(meta["near"]), float(meta["far"])
+        n = max(1, int(icfg["num_random"]))
+        cams = [scene.cameras[i] for i in scene.train_ids] or list(scene.cameras)
+        xyz = frustum_points(cams, near, far, n, int(config["seed"]))
+        rgb = np.random.default_rng(int(config["seed"]) + 1).random((n, 3))
+        fld, _ = init_field(xyz, rgb, "points", n, centre, half, sh, feature_dim, int(config["seed"]), None)
+        return fld, f"frustum ({n} in the train cameras' frusta, depth {near:.4g}..{far:.4g}, uniform in 1/z)"
+    return init_field(scene.points, pc, mode, int(icfg["num_random"]), centre, half, sh, feature_dim,
+                      int(config["seed"]), icfg.get("max_points"))

@@ -8,7 +8,6 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
-from gsbench.render import resolve_backend
 
 from gsbench.methods.trainer import LossResult, Trainer, TrainViews, periodic_eval
 
@@ -19,15 +18,12 @@ def uses(config: dict) -> dict:
     return get_spec(config["method"]).uses(config)
 
 
-def resolve_render_backend(config: dict) -> str:
-    """The concrete backend id ('auto' -> cpu on CPU tensors); checked importable now, not mid-run."""
-    name = resolve_backend(config.get("backend", "auto"), torch.device("cpu"))
-    if name == "cpu":
-        try:
-            import gsbench.render.cpu_backend  # noqa: F401
-        except ImportError as e:
-            raise InputError(f"render backend 'cpu' is not available in this build ({e}); use --set backend=torch") from None
-    return name
+def resolve_render_backend(config: dict, device: Optional[torch.device] = None) -> str:
+    """The concrete backend id for the training device (`auto` -> gsplat on CUDA, cpu on the CPU);
+    checked importable now, not mid-run. `device` defaults to the config's `train.device`."""
+    from gsbench.methods.device import resolve_backend_for, resolve_device
+    dev = resolve_device(config) if device is None else torch.device(device)
+    return resolve_backend_for(config.get("backend", "auto"), dev)
 
 
 def cache_dir_for(config: dict, run_dir: Path) -> Path:
@@ -89,9 +85,10 @@ def run_trainer(config: dict, views: TrainViews, scene, field0: GaussianField, r
                 extra_state: Optional[Callable[[], dict]] = None, method=None) -> GaussianField:
     """Run one trainer phase, resuming when `resume` is a checkpoint of that phase. With `method` (a
     semantic Method whose autoencoder is set), the periodic evaluation also logs segmentation mIoU."""
+    dev = next(iter(views.images.values())).device if views.images else torch.device("cpu")
     tr = Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase=phase,
                  iterations=iterations, trainable=trainable, densify=densify, backend=backend,
-                 seed=int(config["seed"]), extra_state=extra_state)
+                 seed=int(config["seed"]), extra_state=extra_state, device=dev)
     tr.eval_fn = periodic_eval(views, backend, tr.background, extra=semantic_eval(method, scene, views, config))
     st = resume if (resume is not None and resume.get("phase") == phase) else None
     return tr.run(progress=progress, resume_state=st)

@@ -82,16 +82,18 @@ class DensifyStats:
         self.max_radii = torch.zeros(n, device=device)
 
     def update(self, means2d_grad: torch.Tensor | None, radii: torch.Tensor, width: int, height: int) -> None:
+        # masked updates (torch.where), not boolean indexing: no host synchronisation on CUDA
         vis = (radii > 0).all(-1) if radii.dim() == 2 else radii > 0
         r = radii.max(-1).values.to(self.max_radii) if radii.dim() == 2 else radii.to(self.max_radii)
-        self.max_radii[vis] = torch.maximum(self.max_radii[vis], r[vis])
+        self.max_radii = torch.where(vis, torch.maximum(self.max_radii, r), self.max_radii)
         if means2d_grad is None:
             return
-        g = means2d_grad.detach().clone()
-        g[:, 0] *= width / 2.0
-        g[:, 1] *= height / 2.0
-        self.grad[vis] += g[vis].norm(dim=-1)
-        self.count[vis] += 1
+        g = means2d_grad.detach()
+        scale = torch.tensor([width / 2.0, height / 2.0], dtype=g.dtype, device=g.device)
+        norm = (g * scale).norm(dim=-1).to(self.grad)
+        visf = vis.to(self.grad)
+        self.grad = self.grad + torch.where(vis, norm, torch.zeros_like(norm))
+        self.count = self.count + visf
 
     def keep(self, mask: torch.Tensor) -> None:
         self.grad, self.count, self.max_radii = self.grad[mask], self.count[mask], self.max_radii[mask]
@@ -107,7 +109,9 @@ class DensifyStats:
         return {"grad": self.grad.cpu(), "count": self.count.cpu(), "max_radii": self.max_radii.cpu()}
 
     def load_state_dict(self, st: dict) -> None:
-        self.grad, self.count, self.max_radii = st["grad"].clone(), st["count"].clone(), st["max_radii"].clone()
+        dev = self.grad.device
+        self.grad, self.count, self.max_radii = (st["grad"].to(dev).clone(), st["count"].to(dev).clone(),
+                                                 st["max_radii"].to(dev).clone())
 
 
 def densify_and_prune(ps: ParamSet, stats: DensifyStats, cfg: dict, extent: float, prune_big: bool,

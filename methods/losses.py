@@ -7,8 +7,11 @@ All image tensors are (H, W, C) or (H, W). Every division, sqrt and normalisatio
 - `solve_scale_shift`: closed-form least squares s, t with s * prior + t ~ target, in float64 on centred,
   magnitude-normalised data, no gradient; returns ok=False (the caller skips and counts) when the prior is
   (near) constant on the valid pixels or fewer than `min_valid` pixels are valid.
-- `depth_loss`: the depth formulations `none | raw_l1 | minmax | scale_shift | pearson`. A `disparity`
-  prior is compared with the inverse rendered depth (1 / max(D, DEPTH_EPS)); `depth`/`metric` with D.
+- `depth_loss`: the depth formulations `none | raw_l1 | minmax | scale_shift | pearson`, on the device
+  without host synchronisation. A `disparity` prior is compared with the inverse rendered depth
+  (1 / max(D, DEPTH_EPS)); `depth`/`metric` with D.
+- `normalised_depth`: D divided by its detached alpha-weighted mean, so L_depth and L_tv are scale-free
+  and the paper's lambdas weigh them the same on every scene (GaussianDS feeds this to both terms).
 - `tv_loss`: isotropic TV sqrt(dx^2 + dy^2 + eps) averaged over pixels (the paper writes a sum; see GAUSSIANDS.md).
 - `sem_loss`: mean |S_hat - S| over the pixels that have a target (and over the d channels).
 - `depth_edges`: E_d = Canny on the (aligned) prior normalised to 8 bits over its valid pixels, optional dilation.
@@ -162,52 +165,112 @@ def render_space_depth(depth: torch.Tensor, kind: str) -> tuple[torch.Tensor, to
 
 @dataclass
 class DepthTerm:
-    loss: Optional[torch.Tensor]   # None = skipped for this view and iteration
-    reason: str = ""
-    s: float = 1.0
-    t: float = 0.0
+    """L_depth of one view. `loss` is a 0-dim tensor (0 where skipped) and `ok` a 0-dim bool tensor:
+    both stay on the device, so the caller counts skips without a host synchronisation."""
+    loss: Optional[torch.Tensor]   # None only for formulation 'none'
+    ok: torch.Tensor
+    s: torch.Tensor
+    t: torch.Tensor
+    n_valid: Optional[torch.Tensor] = None
+    min_valid: int = 10
+
+    @property
+    def reason(self) -> str:
+        """Why the term was skipped ('' when not): for diagnostics and tests; reading it synchronises."""
+        if self.loss is None:
+            return "formulation none"
+        if bool(self.ok):
+            return ""
+        n = int(self.n_valid) if self.n_valid is not None else 0
+        if n < max(2, self.min_valid):
+            return f"{n} valid pixels (< {self.min_valid})"
+        return "prior is (near) constant on the valid pixels"
+
+
+def normalised_depth(depth: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
+    """The rendered depth divided by its own alpha-weighted mean (detached): scale-free, so L_depth
+    and L_tv mean the same on a scene and on the same scene scaled by any factor."""
+    ref = depth.detach().sum() / alpha.detach().sum().clamp_min(1e-6)
+    return depth / ref.clamp_min(DEPTH_EPS)
+
+
+def _masked_mean(x: torch.Tensor, w: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
+    return (x * w).sum() / n.clamp_min(1.0)
 
 
 def depth_loss(formulation: str, depth: torch.Tensor, prior: np.ndarray | torch.Tensor,
                prior_valid: np.ndarray | torch.Tensor, kind: str, min_valid: int = 10) -> DepthTerm:
-    """L_depth of one view under a formulation; loss=None when skipped (the caller counts skips)."""
+    """L_depth of one view under a formulation, without host synchronisation: masked sums instead of
+    boolean indexing; a view with fewer than `min_valid` usable pixels or a (near) constant prior has
+    ok=False and loss 0 (every branch stays finite, so no NaN gradient leaks through the mask)."""
     if formulation not in DEPTH_FORMULATIONS:
         raise ValueError(f"unknown depth formulation {formulation!r}; choose one of {', '.join(DEPTH_FORMULATIONS)}")
+    dev = depth.device
+    one, zero = torch.ones((), device=dev), torch.zeros((), device=dev)
     if formulation == "none":
-        return DepthTerm(None, "formulation none")
+        return DepthTerm(None, torch.zeros((), dtype=torch.bool, device=dev), one, zero)
     r, usable = render_space_depth(depth, kind)
-    p = torch.as_tensor(np.asarray(prior, dtype=np.float32) if not isinstance(prior, torch.Tensor) else prior,
-                        device=depth.device).to(depth.dtype)
-    pv = torch.as_tensor(_np_bool(prior_valid), device=depth.device)
-    m = usable.detach() & pv & torch.isfinite(p)
-    n = int(m.sum())
-    if n < max(2, int(min_valid)):
-        return DepthTerm(None, f"{n} valid pixels (< {min_valid})")
-    rv, pvv = r[m], p[m]
+    p = prior if isinstance(prior, torch.Tensor) else torch.as_tensor(np.asarray(prior, dtype=np.float32))
+    p = p.to(device=dev, dtype=depth.dtype)
+    pv = prior_valid if isinstance(prior_valid, torch.Tensor) else torch.as_tensor(_np_bool(prior_valid))
+    m = usable.detach() & pv.to(dev) & torch.isfinite(p)
+    w = m.to(depth.dtype)
+    n = w.sum()
+    ok = n >= max(2, int(min_valid))
+    p0 = torch.where(m, p, torch.zeros_like(p))
+    r0 = torch.where(m, r, torch.zeros_like(r))
+    s, t = one, zero
     if formulation == "raw_l1":
-        return DepthTerm((rv - pvv).abs().mean())
-    if formulation == "scale_shift":
-        st = solve_scale_shift(pvv, rv, None, min_valid)
-        if not st.ok:
-            return DepthTerm(None, st.reason)
-        return DepthTerm((rv - (st.s * pvv + st.t)).abs().mean(), "", st.s, st.t)
-    if formulation == "minmax":
-        pmin, pmax = pvv.min(), pvv.max()
-        if float(pmax - pmin) <= CONSTANT_REL_EPS * max(1.0, float(pmax.abs())):
-            return DepthTerm(None, "prior is (near) constant on the valid pixels")
-        rmin, rmax = rv.min().detach(), rv.max().detach()
-        rn = (rv - rmin) / (rmax - rmin).clamp_min(1e-12)
-        pn = (pvv - pmin) / (pmax - pmin)
-        return DepthTerm((rn - pn).abs().mean())
-    # pearson: 1 - correlation
-    pc = pvv - pvv.mean()
-    pstd = torch.sqrt((pc * pc).mean())
-    if float(pstd) <= CONSTANT_REL_EPS * max(1.0, float(pvv.abs().max())):
-        return DepthTerm(None, "prior is (near) constant on the valid pixels")
-    rc = rv - rv.mean()
-    rstd = torch.sqrt((rc * rc).mean() + 1e-20)
-    corr = (rc * pc).mean() / (rstd * pstd)
-    return DepthTerm(1.0 - corr)
+        loss = _masked_mean((r0 - p0).abs(), w, n)
+    elif formulation == "scale_shift":
+        s, t, good = _scale_shift_masked(p0, r0.detach(), m, n)
+        ok = ok & good
+        loss = _masked_mean((r0 - (s.to(r.dtype) * p0 + t.to(r.dtype))).abs(), w, n)
+    elif formulation == "minmax":
+        big = torch.finfo(p.dtype).max
+        pmin, pmax = torch.where(m, p, big).amin(), torch.where(m, p, -big).amax()
+        rd = r0.detach()
+        rmin, rmax = torch.where(m, rd, big).amin(), torch.where(m, rd, -big).amax()
+        span = pmax - pmin
+        ok = ok & (span > CONSTANT_REL_EPS * torch.clamp_min(pmax.abs(), 1.0))
+        span = torch.where(ok, span, one)
+        rspan = torch.where(ok, (rmax - rmin).clamp_min(1e-12), one)
+        pmin, rmin = torch.where(ok, pmin, zero), torch.where(ok, rmin, zero)
+        loss = _masked_mean(((r0 - rmin) / rspan - (p0 - pmin) / span).abs(), w, n)
+    else:   # pearson: 1 - correlation
+        nn_ = n.clamp_min(1.0)
+        pc = (p0 - (p0 * w).sum() / nn_) * w
+        pstd = torch.sqrt((pc * pc).sum() / nn_)
+        pmax = torch.where(m, p.abs(), zero).amax()
+        ok = ok & (pstd > CONSTANT_REL_EPS * torch.clamp_min(pmax, 1.0))
+        pstd = torch.where(ok, pstd, one)
+        rc = (r0 - (r0 * w).sum() / nn_) * w
+        rstd = torch.sqrt((rc * rc).sum() / nn_ + 1e-20)
+        loss = 1.0 - (rc * pc).sum() / nn_ / (rstd * pstd)
+    loss = torch.where(ok, loss, torch.zeros_like(loss))
+    return DepthTerm(loss, ok, s, t, n, int(min_valid))
+
+
+def _scale_shift_masked(x: torch.Tensor, y: torch.Tensor, m: torch.Tensor, n: torch.Tensor):
+    """`solve_scale_shift` on the device: float64, magnitude-normalised, masked; (s, t, ok) tensors."""
+    w = m.to(torch.float64)
+    x, y = x.to(torch.float64), y.to(torch.float64)
+    nn_ = n.to(torch.float64).clamp_min(1.0)
+    ax = (x.abs() * w).amax()
+    ay = (y.abs() * w).amax()
+    ok = ax > 0
+    ax = torch.where(ok, ax, torch.ones_like(ax))
+    ay = torch.where(ay > 0, ay, torch.ones_like(ay))
+    xs, ys = x / ax, y / ay
+    xm, ym = (xs * w).sum() / nn_, (ys * w).sum() / nn_
+    xc, yc = (xs - xm) * w, (ys - ym) * w
+    var = (xc * xc).sum()
+    ok = ok & torch.isfinite(var) & (var > (CONSTANT_REL_EPS ** 2) * nn_ * torch.clamp_min(xm * xm, 1.0))
+    s_n = (xc * yc).sum() / torch.where(ok, var, torch.ones_like(var))
+    t_n = ym - s_n * xm
+    s, t = s_n * ay / ax, t_n * ay
+    ok = ok & torch.isfinite(s) & torch.isfinite(t)
+    return torch.where(ok, s, torch.ones_like(s)), torch.where(ok, t, torch.zeros_like(t)), ok
 
 
 def tv_loss(depth: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
@@ -220,19 +283,19 @@ def tv_loss(depth: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
 
 
 # ---------------------------------------------------------------------------- semantics
-def sem_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor) -> Optional[torch.Tensor]:
-    """mean |S_hat - S| over pixels with a target (and channels); None when no pixel has one."""
-    if not bool(has_target.any()):
-        return None
-    return (s_hat[has_target] - target[has_target]).abs().mean()
+def sem_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor) -> torch.Tensor:
+    """mean |S_hat - S| over pixels with a target (and channels), as a masked sum (no host sync);
+    0 when no pixel has one: the caller knows that per view up front and counts the skip."""
+    w = has_target.to(s_hat.dtype)[..., None]
+    n = w.sum() * s_hat.shape[-1]
+    return ((s_hat - target).abs() * w).sum() / n.clamp_min(1.0)
 
 
-def ds_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor, edges: torch.Tensor) -> Optional[torch.Tensor]:
-    """mean |E_d * (S_hat - S)| over pixels with a target; E_d (H, W) in {0, 1}."""
-    if not bool(has_target.any()):
-        return None
-    diff = (s_hat - target).abs() * edges[..., None].to(s_hat.dtype)
-    return diff[has_target].mean()
+def ds_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor, edges: torch.Tensor) -> torch.Tensor:
+    """mean |E_d * (S_hat - S)| over pixels with a target; E_d (H, W) in {0, 1}; 0 when none has one."""
+    w = has_target.to(s_hat.dtype)[..., None]
+    n = w.sum() * s_hat.shape[-1]
+    return ((s_hat - target).abs() * (edges.to(s_hat.dtype)[..., None] * w)).sum() / n.clamp_min(1.0)
 
 
 def to_uint8_minmax(values: np.ndarray, valid: np.ndarray) -> Optional[np.ndarray]:

@@ -29,8 +29,9 @@ def fit_autoencoder(mask_features: dict, ae_cfg: dict, latent_dim: int, seed: in
                              int(ae_cfg.get("epochs", 200)), float(ae_cfg.get("lr", 1e-3)), seed)
 
 
-def build_targets(masks: dict, mask_features: dict, ae: FeatureAutoencoder, sizes: dict[int, tuple[int, int]]) -> SemanticTargets:
-    """Per-view latent target maps. `sizes`: view id -> (W, H) of the training image."""
+def build_targets(masks: dict, mask_features: dict, ae: FeatureAutoencoder, sizes: dict[int, tuple[int, int]],
+                  device: torch.device | str = "cpu") -> SemanticTargets:
+    """Per-view latent target maps (built once, then kept on `device`). `sizes`: view id -> (W, H)."""
     lat, has = {}, {}
     for v, (W, H) in sizes.items():
         m = masks.get(v)
@@ -46,11 +47,11 @@ def build_targets(masks: dict, mask_features: dict, ae: FeatureAutoencoder, size
             if have:
                 f = torch.as_tensor(np.stack([np.asarray(mask_features[(v, t)], dtype=np.float32) for t in have]))
                 with torch.no_grad():
-                    z = ae.encode(f)
+                    z = ae.encode(f.to(next(ae.parameters()).device)).cpu()
                 mt = torch.as_tensor(m.astype(np.int64))
                 for j, t in enumerate(have):
                     sel = mt == t
                     S[sel] = z[j]
                     hv |= sel
-        lat[v], has[v] = S, hv
+        lat[v], has[v] = S.to(device), hv.to(device)
     return SemanticTargets(lat, has)

@@ -12,6 +12,15 @@ holds parameters, Adam state, densification statistics, RNG states, step and ela
 `train_log.jsonl` is cut back to the checkpoint's step so the log has no duplicated steps.
 A non-finite loss or parameter writes status "nonfinite" and raises NonFiniteError; the last good
 checkpoint is kept.
+
+Device: the field, Adam state, densification statistics and background live on the device of the
+views' images (methods.device.resolve_device). A step does no host work: loss terms, skip counts
+and a first-non-finite-step flag stay on the device and are read only at log, eval, checkpoint and
+densification steps (the loop's only synchronisation points), so a non-finite loss is reported
+with its exact step at the next such point and no checkpoint is ever written after it.
+SH colours (N, K, 3) are trained as two Adam groups, the DC band (`train.lr.color`) and the rest
+(`colors_rest`, times `train.lr.color_rest_factor`), with one band more every
+`train.sh_increase_every` steps (3DGS).
 """
 from __future__ import annotations
 
@@ -37,13 +46,16 @@ CHECKPOINT = "checkpoint.pt"
 TRAIN_LOG = "train_log.jsonl"
 
 LR_KEYS = {"colors": "color", "opacity_logits": "opacity", "log_scales": "scaling", "quats": "rotation", "features": "semantic"}
+SH_REST = "colors_rest"     # SH bands 1..3 as their own Adam group (3DGS: 1/20 of the base colour LR)
 
 
 @dataclass
 class LossResult:
     total: torch.Tensor
-    terms: dict[str, float] = field(default_factory=dict)     # logged values (unweighted terms)
-    skipped: dict[str, int] = field(default_factory=dict)     # counted skips, e.g. {"depth": 1}
+    terms: dict[str, torch.Tensor | float] = field(default_factory=dict)     # logged values (unweighted terms)
+    skipped: dict[str, torch.Tensor | int] = field(default_factory=dict)     # counted skips, e.g. {"depth": 1}
+    weighted: dict[str, torch.Tensor | float] = field(default_factory=dict)  # lambda * term: logged as loss_share
+    # Values may be device tensors: the trainer sums them on the device and reads them at log steps only.
 
 
 @dataclass
@@ -106,9 +118,23 @@ def init_field(points: Optional[np.ndarray], colors: Optional[np.ndarray], mode:
     return field_, how
 
 
-def field_from_params(ps: ParamSet) -> GaussianField:
-    p = ps.params
-    return GaussianField(p["means"], p["log_scales"], p["quats"], p["opacity_logits"], p["colors"], p.get("features"))
+def field_from_params(ps: ParamSet | dict, sh_active: Optional[int] = None) -> GaussianField:
+    """The field of a parameter set (or a checkpoint's `params`); SH bands stored as colours (N,1,3) plus
+    `colors_rest`; `sh_active` keeps only the bands of that degree (3DGS's one band more per interval)."""
+    p = ps.params if isinstance(ps, ParamSet) else ps
+    colors = p["colors"]
+    if SH_REST in p:
+        colors = torch.cat([colors, p[SH_REST]], 1)
+    if sh_active is not None and colors.dim() == 3:
+        colors = colors[:, :(int(sh_active) + 1) ** 2]
+    return GaussianField(p["means"], p["log_scales"], p["quats"], p["opacity_logits"], colors, p.get("features"))
+
+
+def sh_active_degree(step: int, max_degree: int, every: int) -> int:
+    """3DGS schedule: degree 0 first, one band more every `every` steps (0 = all bands from the start)."""
+    if every <= 0:
+        return max_degree
+    return min(max_degree, max(0, int(step)) // int(every))
 
 
 # ---------------------------------------------------------------------------- trainer
@@ -119,7 +145,7 @@ class Trainer:
                  loss_fn: Callable[[int, RenderOutput, torch.Tensor], LossResult], *, phase: str = "main",
                  iterations: Optional[int] = None, trainable: Optional[set[str]] = None, densify: bool = True,
                  backend: str = "torch", seed: int = 0, extra_state: Optional[Callable[[], dict]] = None,
-                 eval_fn: Optional[Callable[[GaussianField], dict]] = None) -> None:
+                 eval_fn: Optional[Callable[[GaussianField], dict]] = None, device: Optional[torch.device] = None) -> None:
         self.cfg = cfg
         self.tcfg = cfg["train"]
         self.views = views
@@ -134,19 +160,28 @@ class Trainer:
         self.extra_state = extra_state
         self.eval_fn = eval_fn
         lr = self.tcfg["lr"]
+        self.device = torch.device(device) if device is not None else field.means.device
         lrs = {"means": lr["position_init"] * self.extent}
         for k, key in LR_KEYS.items():
             lrs[k] = lr[key]
-        tensors = {k: v for k, v in field.tensors().items() if v is not None}
+        lrs[SH_REST] = float(lr["color"]) * float(lr.get("color_rest_factor", 0.05))
+        tensors = {k: v.to(self.device) for k, v in field.tensors().items() if v is not None}
+        self.sh_max = field.sh_degree or 0
+        self.sh_every = int(self.tcfg.get("sh_increase_every", 1000) or 0)
+        if self.sh_max > 0:
+            c = tensors.pop("colors")
+            tensors["colors"], tensors[SH_REST] = c[:, :1].contiguous(), c[:, 1:].contiguous()
+        if trainable is not None and "colors" in trainable:
+            trainable = set(trainable) | {SH_REST}
         self.ps = ParamSet(tensors, lrs, trainable)
-        self.stats = DensifyStats(self.ps.num)
+        self.stats = DensifyStats(self.ps.num, device=self.device)
         self.step = 0
         self.elapsed = 0.0
         self.view_rng = np.random.default_rng(self.seed)
         self.view_stack: list[int] = []
-        self.torch_gen = torch.Generator().manual_seed(self.seed + 1)
+        self.torch_gen = torch.Generator(device=self.device).manual_seed(self.seed + 1)
         bg = self.tcfg.get("background") or [0.0, 0.0, 0.0]
-        self.background = torch.tensor(bg, dtype=torch.float32)
+        self.background = torch.tensor(bg, dtype=torch.float32, device=self.device)
 
     # ------------------------------------------------------------------ state
     @property
@@ -166,14 +201,15 @@ class Trainer:
             raise ValueError(f"checkpoint phase {st.get('phase')!r} != {self.phase!r}")
         lrs = {g["name"]: g["lr"] for g in self.ps.optimizer.param_groups}
         trainable = {g["name"] for g in self.ps.optimizer.param_groups}
-        self.ps = ParamSet(st["params"], {k: lrs.get(k, 0.0) for k in st["params"]}, trainable)
+        self.ps = ParamSet({k: v.to(self.device) for k, v in st["params"].items()},
+                           {k: lrs.get(k, 0.0) for k in st["params"]}, trainable)
         self.ps.optimizer.load_state_dict(st["optimizer"])
         self.stats.load_state_dict(st["densify"])
         self.step = int(st["step"])
         self.elapsed = float(st["elapsed_s"])
         self.view_rng.bit_generator.state = st["view_rng"]
         self.view_stack = list(st["view_stack"])
-        self.torch_gen.set_state(st["torch_gen"])
+        self.torch_gen.set_state(st["torch_gen"].cpu() if torch.is_tensor(st["torch_gen"]) else st["torch_gen"])
         torch.set_rng_state(st["torch_rng"])
 
     def save_checkpoint(self) -> None:
@@ -210,6 +246,17 @@ class Trainer:
                 raise NonFiniteError(f"non-finite parameter {k!r} at step {self.step} (phase {self.phase}); "
                                      f"{self._kept()}")
 
+    def _synchronize(self) -> None:
+        if self.device.type == "cuda":
+            torch.cuda.synchronize(self.device)
+
+    def _raise_if_bad(self, bad_step: torch.Tensor) -> None:
+        """Non-finite losses are flagged on the device each step and raised here (log, eval, checkpoint
+        and densification steps), with the first bad step; no checkpoint is written after it."""
+        b = int(bad_step)
+        if b > 0:
+            raise NonFiniteError(f"non-finite loss at step {b} (phase {self.phase}); {self._kept()}")
+
     # ------------------------------------------------------------------ loop
     def run(self, progress: bool = True, resume_state: Optional[dict] = None) -> GaussianField:
         log_path = self.run_dir / TRAIN_LOG
@@ -223,9 +270,11 @@ class Trainer:
         log_every = max(1, int(self.tcfg["log_every"]))
         eval_every = int(self.tcfg.get("eval_every") or 0)
         ckpt_every = int(self.tcfg.get("checkpoint_every") or 0)
-        acc: dict[str, float] = {}
+        acc: dict = {}          # device tensors (or floats) summed per step, read at log steps only
+        acc_w: dict = {}
         acc_n = 0
-        skipped: dict[str, int] = {}
+        skipped: dict = {}
+        bad_step = torch.zeros((), dtype=torch.long, device=self.device)   # first step with a non-finite loss
         bar = tqdm(total=self.iterations, initial=self.step, desc=f"train[{self.phase}]", disable=not progress,
                    dynamic_ncols=True, leave=False)
         while self.step < self.iterations:
@@ -235,10 +284,11 @@ class Trainer:
             vid = self._next_view()
             cam = self.views.cameras[vid]
             gt = self.views.images[vid]
-            fld = field_from_params(self.ps)
+            fld = field_from_params(self.ps, sh_active_degree(self.step - 1, self.sh_max, self.sh_every))
             out = render(fld, cam, backend=self.backend, background=self.background)
             res = self.loss_fn(vid, out, gt)
-            self._check_finite("loss", res.total.detach())
+            tot = res.total.detach()
+            bad_step = torch.where((bad_step == 0) & ~torch.isfinite(tot), torch.full_like(bad_step, self.step), bad_step)
             self.ps.optimizer.zero_grad(set_to_none=True)
             res.total.backward()
             with torch.no_grad():
@@ -252,39 +302,59 @@ class Trainer:
                         raise
                     raise NonFiniteError(f"optimiser step overflowed at step {self.step} (phase {self.phase}): {e}; "
                                          f"{self._kept()}") from None
-                self._check_finite("parameters")
                 info = {}
                 if self.densify and self.step < int(d["until_iter"]):
                     if self.step > int(d["from_iter"]) and self.step % int(d["interval"]) == 0:
+                        self._raise_if_bad(bad_step)      # never densify from non-finite values
                         reset_int = int(d["opacity_reset_interval"])
                         info = densify_and_prune(self.ps, self.stats, d, self.extent,
                                                  prune_big=self.step > reset_int, generator=self.torch_gen)
                     if int(d["opacity_reset_interval"]) > 0 and self.step % int(d["opacity_reset_interval"]) == 0:
                         reset_opacity(self.ps)
                         info["opacity_reset"] = True
-            self.elapsed += time.perf_counter() - t0
             for k, v in res.terms.items():
-                acc[k] = acc.get(k, 0.0) + float(v)
+                acc[k] = acc.get(k, 0.0) + v
+            for k, v in res.weighted.items():
+                acc_w[k] = acc_w.get(k, 0.0) + v
             acc_n += 1
             for k, v in res.skipped.items():
-                skipped[k] = skipped.get(k, 0) + int(v)
+                skipped[k] = skipped.get(k, 0) + v
             bar.update(1)
-            if self.step % log_every == 0 or self.step == self.iterations or info:
+            is_log = self.step % log_every == 0 or self.step == self.iterations or bool(info)
+            is_eval = self.eval_fn is not None and eval_every > 0 and (self.step % eval_every == 0 or self.step == self.iterations)
+            is_ckpt = ckpt_every > 0 and (self.step % ckpt_every == 0) and self.step < self.iterations
+            if is_log or is_eval or is_ckpt:
+                # the only host synchronisation of the loop: finiteness, timings and logged values
+                self._synchronize()
+                self._raise_if_bad(bad_step)
+                self._check_finite("parameters")
+            self.elapsed += time.perf_counter() - t0
+            if is_log:
+                loss = {k: float(v) / max(1, acc_n) for k, v in acc.items()}
                 rec = {"phase": self.phase, "step": self.step, "wall_s": round(self.elapsed, 4),
-                       "loss": {k: v / max(1, acc_n) for k, v in acc.items()}, "n_gaussians": self.ps.num,
-                       "lr_position": lr_pos, "skipped": dict(skipped)}
+                       "loss": loss, "n_gaussians": self.ps.num, "lr_position": lr_pos,
+                       "skipped": {k: int(v) for k, v in skipped.items()}}
+                if acc_w:
+                    w = {k: float(v) for k, v in acc_w.items()}
+                    tot_w = sum(w.values())
+                    rec["loss_share"] = {k: (v / tot_w if tot_w > 0 else 0.0) for k, v in w.items()}
+                if self.sh_max > 0:
+                    rec["sh_degree"] = sh_active_degree(self.step - 1, self.sh_max, self.sh_every)
                 if info:
                     rec["densify"] = info
                 append_jsonl(log_path, rec)
-                if "total" in acc:
-                    bar.set_postfix(loss=f"{acc['total'] / max(1, acc_n):.4f}", n=self.ps.num)
-                acc, acc_n, skipped = {}, 0, {}
-            if self.eval_fn is not None and eval_every > 0 and (self.step % eval_every == 0 or self.step == self.iterations):
+                if "total" in loss:
+                    bar.set_postfix(loss=f"{loss['total']:.4f}", n=self.ps.num)
+                acc, acc_w, acc_n, skipped = {}, {}, 0, {}
+            if is_eval:
                 ev = self.eval_fn(self.field)
                 append_jsonl(log_path, {"phase": self.phase, "step": self.step, "wall_s": round(self.elapsed, 4), "eval": ev})
-            if ckpt_every > 0 and (self.step % ckpt_every == 0) and self.step < self.iterations:
+            if is_ckpt:
                 self.save_checkpoint()
         bar.close()
+        self._synchronize()
+        self._raise_if_bad(bad_step)
+        self._check_finite("parameters")
         self.save_checkpoint()
         return self.field
 

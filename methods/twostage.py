@@ -2,7 +2,7 @@
 
 Stage 1 (`rgb`): RGB-only 3DGS (as `vanilla`, `train.iterations`). Stage 2 (`semantic`): geometry and
 colour frozen, no densification; only the per-Gaussian latents are optimised with L_sem for
-`twostage.semantic_iterations`, from per-frame (unpropagated) masks: ids are not consistent across
+`twostage.semantic_iterations` (null = train.iterations, GaussianDS's semantic budget), from per-frame (unpropagated) masks: ids are not consistent across
 views, so each view's target comes from that view's own mask features only.
 """
 from __future__ import annotations
@@ -15,8 +15,16 @@ from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import fit_priors, resolve_render_backend, run_trainer, uses
 from gsbench.methods.losses import sem_loss
 from gsbench.methods.semantic import build_targets, fit_autoencoder
-from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
+from gsbench.methods.device import resolve_device
+from gsbench.methods.trainer import LossResult, field_from_params, load_checkpoint_if_any
 from gsbench.methods.vanilla import rgb_loss_fn
+
+
+def semantic_budget(config: dict) -> int:
+    """Stage 2's steps: `twostage.semantic_iterations`, or (null) as many semantic steps as GaussianDS
+    takes in the same config (`train.iterations`: each of its joint steps is a semantic step)."""
+    v = (config.get("twostage") or {}).get("semantic_iterations")
+    return int(config["train"]["iterations"]) if v is None else int(v)
 
 
 class TwoStage(Method):
@@ -25,8 +33,10 @@ class TwoStage(Method):
     def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
         run_dir = Path(run_dir)
         self.config = config
-        self._backend = resolve_render_backend(config)
-        views, (W, H) = load_views(scene, config)
+        dev = resolve_device(config)
+        self._backend = resolve_render_backend(config, dev)
+        views, (W, H) = load_views(scene, config, device=dev)
+        sem_steps = semantic_budget(config)
         train_ids = sorted(views.cameras)
         ckpt = load_checkpoint_if_any(run_dir)
         # ---- stage 1: RGB
@@ -37,6 +47,9 @@ class TwoStage(Method):
         else:
             rgb_field = run_trainer(config, views, scene, field0, run_dir, rgb_loss_fn(float(config["train"]["lambda_dssim"])),
                                     phase="rgb", backend=self._backend, progress=progress, resume=ckpt)
+        self.info["device"] = str(dev)
+        self.info["budget"] = {"rgb_steps": int(config["train"]["iterations"]),
+                               "semantic_steps": sem_steps if uses(config)["semantics"] else 0}
         if not uses(config)["semantics"]:
             self.field = rgb_field
             self.info["n_gaussians"] = self.field.num
@@ -53,28 +66,27 @@ class TwoStage(Method):
         ae_state = (ckpt or {}).get("extra", {}).get("autoencoder") if (ckpt or {}).get("phase") == "semantic" else None
         if ae_state is not None:
             ae.load_state_dict(ae_state)
-        self.autoencoder = ae
+        self.autoencoder = ae.to(dev)
         self.info["autoencoder"] = ae_stats
-        targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids})
+        targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids}, device=dev)
+        has_any = {v: bool(targets.has_target[v].any()) for v in train_ids}
         if rgb_field is None:
-            p = ckpt["params"]
-            from gsbench.gaussians import GaussianField
-            sem_field0 = GaussianField(p["means"], p["log_scales"], p["quats"], p["opacity_logits"], p["colors"], p["features"])
+            sem_field0 = field_from_params(ckpt["params"])
         else:
-            sem_field0 = rgb_field.with_features(torch.zeros(rgb_field.num, d))
+            sem_field0 = rgb_field.with_features(torch.zeros(rgb_field.num, d, device=rgb_field.means.device))
 
         def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
-            ls = sem_loss(out.features, targets.latents[vid], targets.has_target[vid])
-            if ls is None:
+            if not has_any[vid]:
                 z = out.features.sum() * 0.0
-                return LossResult(z, {"total": 0.0}, {"sem": 1})
-            v = float(ls.detach())
-            return LossResult(ls, {"sem": v, "total": v})
+                return LossResult(z, {"total": z.detach()}, {"sem": 1})
+            ls = sem_loss(out.features, targets.latents[vid], targets.has_target[vid])
+            v = ls.detach()
+            return LossResult(ls, {"sem": v, "total": v}, weighted={"sem": v})
 
         self.field = run_trainer(config, views, scene, sem_field0, run_dir, loss_fn, phase="semantic",
                                  backend=self._backend, progress=progress,
                                  resume=ckpt if (ckpt or {}).get("phase") == "semantic" else None,
-                                 iterations=int(config["twostage"]["semantic_iterations"]),
+                                 iterations=sem_steps,
                                  trainable={"features"}, densify=False,
                                  extra_state=lambda: {"autoencoder": self.autoencoder.state_dict()},
                                  method=self)

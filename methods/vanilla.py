@@ -7,6 +7,7 @@ import torch
 
 from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import resolve_render_backend, run_trainer
+from gsbench.methods.device import resolve_device
 from gsbench.methods.losses import reconstruction_loss
 from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
 
@@ -14,8 +15,8 @@ from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
 def rgb_loss_fn(lam_dssim: float):
     def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
         rec = reconstruction_loss(out.rgb, gt, lam_dssim)
-        v = float(rec.detach())
-        return LossResult(rec, {"rec": v, "total": v})
+        v = rec.detach()
+        return LossResult(rec, {"rec": v, "total": v}, weighted={"rec": v})
     return loss_fn
 
 
@@ -25,11 +26,14 @@ class Vanilla(Method):
     def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
         run_dir = Path(run_dir)
         self.config = config
-        self._backend = resolve_render_backend(config)
-        views, _ = load_views(scene, config)
+        dev = resolve_device(config)
+        self._backend = resolve_render_backend(config, dev)
+        views, _ = load_views(scene, config, device=dev)
         field0, how = scene_init(scene, config, 0)
         self.info["init"] = how
         self.field = run_trainer(config, views, scene, field0, run_dir, rgb_loss_fn(float(config["train"]["lambda_dssim"])),
                                  phase="main", backend=self._backend, progress=progress,
                                  resume=load_checkpoint_if_any(run_dir))
         self.info["n_gaussians"] = self.field.num
+        self.info["device"] = str(dev)
+        self.info["budget"] = {"rgb_steps": int(config["train"]["iterations"]), "semantic_steps": 0}

@@ -64,7 +64,7 @@ def _render_projected(field: GaussianField, camera: Camera, name: str):
     """Shared torch projection + the named rasterizer: (out, t_final, means2d, radii, n_visible)."""
     device, dtype = field.means.device, field.means.dtype
     proj: Projected = project_gaussians(field, camera)
-    cam_center = torch.as_tensor(camera.center, device=device, dtype=dtype)
+    cam_center = camera.device_tensors(device, dtype)[2]
     rgb_g = field.subset(proj.ids).rgb(cam_center)   # colours of visible Gaussians only (NaN-free grads)
     parts = [rgb_g, proj.depths[:, None]]
     if field.features is not None:

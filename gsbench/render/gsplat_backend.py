@@ -16,6 +16,8 @@ Mapping of our field and camera to gsplat's arguments (one call renders everythi
 - Outputs: rgb = channels[:3], features = channels[3:-1], depth = channels[-1], alpha =
   render_alphas. `means2d` is gsplat's projected means (its `.grad` is filled after backward via
   a hook, for densification); `radii` is gsplat's per-axis radii (0 = culled).
+info["n_visible"] is a 0-dim device tensor here (int() it when needed): reading it would synchronise
+with the GPU, and training renders every step without a host synchronisation.
 gsplat computes in float32; a float64 field is cast (gradients flow back through the cast) and the
 outputs are cast back. gsplat's screen extent and tile tests are its own; they only differ from
 the shared rules where alpha < 1/255, so results match the `torch` backend to float32 rounding
@@ -49,7 +51,8 @@ def gsplat_arguments(field: GaussianField, camera: Camera) -> dict:
     """Keyword arguments of gsplat.rasterization for one camera (device of the field, float32)."""
     device = field.means.device
     f32 = torch.float32
-    cam_center = torch.as_tensor(camera.center, device=device, dtype=field.means.dtype)
+    K, w2c, _ = camera.device_tensors(device, f32)
+    cam_center = camera.device_tensors(device, field.means.dtype)[2]
     colors = field.rgb(cam_center)
     if field.features is not None:
         colors = torch.cat([colors, field.features], dim=1)
@@ -59,8 +62,8 @@ def gsplat_arguments(field: GaussianField, camera: Camera) -> dict:
         scales=field.scales.to(f32),
         opacities=field.opacity.to(f32),
         colors=colors.to(f32),
-        viewmats=torch.as_tensor(camera.world_to_camera, device=device, dtype=f32)[None],
-        Ks=torch.as_tensor(camera.K, device=device, dtype=f32)[None],
+        viewmats=w2c[None],
+        Ks=K[None],
         width=camera.width,
         height=camera.height,
         near_plane=rules.NEAR_PLANE,
@@ -120,7 +123,7 @@ def render_gsplat(field: GaussianField, camera: Camera, background: Optional[tor
     radii = radii.to(torch.int64)
     return RenderOutput(rgb=rgb, depth=depth, features=feats, alpha=alpha, backend="gsplat",
                         means2d=_means2d_with_grad(meta["means2d"]), radii=radii,
-                        info={"n_gaussians": field.num, "n_visible": int((radii > 0).all(-1).sum()),
+                        info={"n_gaussians": field.num, "n_visible": (radii > 0).all(-1).sum(),
                               "width": camera.width, "height": camera.height,
                               "dtype": str(field.means.dtype).replace("torch.", ""),
                               "device": str(field.means.device),

@@ -28,8 +28,7 @@ class Projected:
 
 
 def camera_tensors(camera: Camera, device, dtype) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    w2c = torch.as_tensor(camera.world_to_camera, device=device, dtype=dtype)
-    K = torch.as_tensor(camera.K, device=device, dtype=dtype)
+    K, w2c, _ = camera.device_tensors(device, dtype)
     return w2c[:3, :3], w2c[:3, 3], K
 
 

@@ -67,8 +67,8 @@ def depth_solve_cases() -> list[Case]:
         r.finite_out = finite and all_finite(st.s, st.t)
         r.finite_grad = finite
         ss = terms[("scale_shift", "depth")]
-        r.passed = bool(r.finite_out and not st.ok and expect in st.reason and ss.loss is None and expect in ss.reason)
-        r.note = f"skip: {st.reason!r} (expected '{expect}'); L_depth scale_shift skipped={ss.loss is None}"
+        r.passed = bool(r.finite_out and not st.ok and expect in st.reason and not bool(ss.ok) and expect in ss.reason)
+        r.note = f"skip: {st.reason!r} (expected '{expect}'); L_depth scale_shift skipped={not bool(ss.ok)}"
         return r
 
     def base(h=24, w=32):

@@ -3,6 +3,9 @@ semantic latents (paper Sec. III-IV; decisions in shared/GAUSSIANDS.md).
 
     L = L_rec + 0.01 L_depth + 1.5 L_tv + 5.0 L_sem + 1.0 L_ds      (config gaussiands.lambdas)
 
+L_depth and L_tv see the rendered depth divided by its own (detached) alpha-weighted mean
+(losses.normalised_depth), so both are scale-free and the lambdas weigh them alike on every scene.
+
 Inputs come from gsbench.priors: pose-aware pseudo-video order (priors.ordering), propagated masks,
 512-d mask features (compressed by the frozen autoencoder to d = gaussiands.latent_dim) and the depth
 prior. Terms the resolved config switched off (gaussiands.losses.*) are neither computed nor fed.
@@ -16,7 +19,9 @@ import torch
 
 from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import fit_priors, resolve_render_backend, run_trainer, uses
-from gsbench.methods.losses import depth_edges, depth_loss, ds_loss, reconstruction_loss, sem_loss, tv_loss
+from gsbench.methods.device import resolve_device
+from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, normalised_depth, reconstruction_loss,
+                                   sem_loss, tv_loss)
 from gsbench.methods.semantic import build_targets, fit_autoencoder
 from gsbench.methods.trainer import LossResult
 
@@ -27,10 +32,11 @@ class GaussianDS(Method):
     def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
         run_dir = Path(run_dir)
         self.config = config
-        self._backend = resolve_render_backend(config)
+        dev = resolve_device(config)
+        self._backend = resolve_render_backend(config, dev)
         g = config["gaussiands"]
         use = uses(config)
-        views, (W, H) = load_views(scene, config)
+        views, (W, H) = load_views(scene, config, device=dev)
         train_ids = sorted(views.cameras)
         pri = fit_priors(scene, config, run_dir, progress=progress)
         self.providers = dict(pri.providers)
@@ -49,9 +55,9 @@ class GaussianDS(Method):
             ae, ae_stats = fit_autoencoder(pri.mask_features, g["autoencoder"], d, int(config["seed"]))
             if ae_state is not None:
                 ae.load_state_dict(ae_state)
-            self.autoencoder = ae
+            self.autoencoder = ae.to(dev)
             self.info["autoencoder"] = ae_stats
-            targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids})
+            targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids}, device=dev)
         # ---- depth prior and its edges E_d (invariant to the per-iteration affine alignment, see losses.py)
         depth = pri.depth if use["depth_prior"] else None
         edges = {}
@@ -62,6 +68,15 @@ class GaussianDS(Method):
             for v in train_ids:
                 edges[v] = torch.as_tensor(depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"], int(e["dilate"])))
             self.info["edge_fraction"] = float(np.mean([float(x.float().mean()) for x in edges.values()])) if edges else 0.0
+            edges = {v: x.to(dev) for v, x in edges.items()}
+        # the depth prior on the device once: values (float32), validity (finite and valid), its kind
+        dprior = {}
+        if depth is not None:
+            for v in train_ids:
+                vals = torch.as_tensor(np.asarray(depth[v].values, dtype=np.float32))
+                ok = torch.as_tensor(np.asarray(depth[v].valid, dtype=bool)) & torch.isfinite(vals)
+                dprior[v] = (torch.nan_to_num(vals, nan=0.0, posinf=0.0, neginf=0.0).to(dev), ok.to(dev), depth[v].kind)
+        has_any = {v: bool(targets.has_target[v].any()) for v in train_ids} if targets is not None else {}
 
         lam = g["lambdas"]
         on = g["losses"]
@@ -71,40 +86,48 @@ class GaussianDS(Method):
         tv_eps = float(g["tv_eps"])
 
         def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
+            # every value stays on the device: no host synchronisation per step (the trainer reads
+            # terms, weighted terms and skip counts at log steps only)
             rec = reconstruction_loss(out.rgb, gt, lam_dssim)
             total = rec
-            terms = {"rec": float(rec.detach())}
+            terms = {"rec": rec.detach()}
+            weighted = {"rec": rec.detach()}
             skipped = {}
+            if (on["depth"] and depth is not None) or on["tv"]:
+                dn = normalised_depth(out.depth, out.alpha)     # scale-free: lambdas mean the same on every scene
             if on["depth"] and depth is not None:
-                p = depth[vid]
-                dt = depth_loss(form, out.depth, p.values, p.valid, p.kind, min_valid)
-                if dt.loss is None:
-                    skipped["depth"] = 1
-                else:
-                    total = total + float(lam["depth"]) * dt.loss
-                    terms["depth"] = float(dt.loss.detach())
+                vals, valid, kind = dprior[vid]
+                dt = depth_loss(form, dn, vals, valid, kind, min_valid)
+                if dt.loss is not None:
+                    w = float(lam["depth"]) * dt.loss
+                    total = total + w
+                    terms["depth"], weighted["depth"] = dt.loss.detach(), w.detach()
+                    skipped["depth"] = (~dt.ok).long()
             if on["tv"]:
-                tv = tv_loss(out.depth, tv_eps)
-                total = total + float(lam["tv"]) * tv
-                terms["tv"] = float(tv.detach())
+                tv = tv_loss(dn, tv_eps)
+                w = float(lam["tv"]) * tv
+                total = total + w
+                terms["tv"], weighted["tv"] = tv.detach(), w.detach()
             if targets is not None and out.features is not None:
                 S, has = targets.latents[vid], targets.has_target[vid]
                 if on["sem"]:
-                    ls = sem_loss(out.features, S, has)
-                    if ls is None:
+                    if not has_any[vid]:
                         skipped["sem"] = 1
                     else:
-                        total = total + float(lam["sem"]) * ls
-                        terms["sem"] = float(ls.detach())
+                        ls = sem_loss(out.features, S, has)
+                        w = float(lam["sem"]) * ls
+                        total = total + w
+                        terms["sem"], weighted["sem"] = ls.detach(), w.detach()
                 if on["ds"] and vid in edges:
-                    ld = ds_loss(out.features, S, has, edges[vid])
-                    if ld is None:
+                    if not has_any[vid]:
                         skipped["ds"] = 1
                     else:
-                        total = total + float(lam["ds"]) * ld
-                        terms["ds"] = float(ld.detach())
-            terms["total"] = float(total.detach())
-            return LossResult(total, terms, skipped)
+                        ld = ds_loss(out.features, S, has, edges[vid])
+                        w = float(lam["ds"]) * ld
+                        total = total + w
+                        terms["ds"], weighted["ds"] = ld.detach(), w.detach()
+            terms["total"] = total.detach()
+            return LossResult(total, terms, skipped, weighted)
 
         extra = (lambda: {"autoencoder": self.autoencoder.state_dict()}) if self.autoencoder is not None else None
         field0, how = scene_init(scene, config, d)
@@ -113,3 +136,7 @@ class GaussianDS(Method):
                                  backend=self._backend, progress=progress, resume=ckpt, extra_state=extra,
                                  method=self)
         self.info["n_gaussians"] = self.field.num
+        self.info["device"] = str(dev)
+        # one joint phase: every step is both an appearance and a semantic step
+        steps = int(config["train"]["iterations"])
+        self.info["budget"] = {"rgb_steps": steps, "semantic_steps": steps if use["semantics"] else 0}
