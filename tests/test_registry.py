@@ -122,9 +122,10 @@ def test_fit_asks_for_the_priors_the_grid_prepares(method, overrides, tiny_scene
     from gsbench.methods.base import training_size
     assert set(registry.METHODS) >= {"vanilla", "twostage", "gaussiands"}
     cache = tmp_path / "cache"
-    cfg = load_config(method, "cpu-small", ["train.iterations=0", "train.eval_views=0", "backend=torch",
+    cfg = load_config(method, "cpu-small", ["train.iterations=1", "train.eval_views=0", "backend=torch",
                                             f"priors.cache_dir={cache}"] + overrides)
     asked = []
+    (tmp_path / "run").mkdir()
 
     def record(scene, priors_cfg, view_ids, size, cache_dir, **kw):
         asked.append({"scene_path": str(scene.path), "priors": priors_cfg, "view_ids": list(view_ids),

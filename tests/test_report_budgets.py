@@ -80,7 +80,7 @@ def test_report_plots_shares_and_lists_dropped(tmp_path: Path):
     html = (tmp_path / "rep" / "index.html").read_text()
     assert "plots/shares_main.png" in html and "1 of 3 run(s) log no loss_share" in html
     assert "Training budget per method" in html
-    assert "Dropped settings: not recorded" in html  # collect does not carry the column yet
+    assert "The resolver dropped no setting in any run." in html   # collect carries the `dropped` column
 
 
 def test_report_prints_requested_tables(tmp_path: Path, capsys):
