@@ -10,6 +10,7 @@ from gsbench.scene import Camera
 
 from .synthetic_spec import AMBIENT, FAR, LIGHTS, WALL_Y, Decal, Prim, SceneSpec
 
+
 def camera_rays(cam: Camera) -> tuple[np.ndarray, np.ndarray]:
     """Origin (3,) and world directions (H*W, 3) with camera-space z = 1 (ray parameter = depth)."""
     jj, ii = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)

@@ -11,13 +11,36 @@ from typing import Any, Callable
 from gsbench.collect import config_key
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, same
 from gsbench.reports.spec import (
-    AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_ORDERING, LOSS_SUBSET_ORDER,
-    METHOD_ORDER, REFERENCE_TEXT, STUDIES, STUDY_REFERENCE, method_label, metric_spec,
+    AX_FORMULATION,
+    AX_LATENT,
+    AX_LOSSES,
+    AX_NOISE_SEVERITY,
+    AX_NOISE_TYPE,
+    AX_ORDERING,
+    LOSS_SUBSET_ORDER,
+    METHOD_ORDER,
+    REFERENCE_TEXT,
+    STUDIES,
+    STUDY_REFERENCE,
+    method_label,
+    metric_spec,
 )
 from gsbench.reports.stats import compare
 from gsbench.reports.studies import (
-    PROTOCOL_ORDER, PROTOCOL_SHORT, _axis_label, _axis_rank, _cell, _combo_text, _eq_filter, _finish, _get,
-    _slug, _spec_for, ordered_methods, runs_of, scene_protocols,
+    PROTOCOL_ORDER,
+    PROTOCOL_SHORT,
+    _axis_label,
+    _axis_rank,
+    _cell,
+    _combo_text,
+    _eq_filter,
+    _finish,
+    _get,
+    _slug,
+    _spec_for,
+    ordered_methods,
+    runs_of,
+    scene_protocols,
 )
 from gsbench.reports.table import CHECK, Cell, Column, Row, Table
 
@@ -153,7 +176,7 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
         return []
     multi = len(pairs) > 1
     columns = []
-    for sc, pr, m in group_cols:
+    for sc, _pr, m in group_cols:
         sp = _spec_for(m)
         columns.append(Column(m, sp.label, sp.latex, sp.better, group=sc if multi else None))
     # mean over the scenes of one protocol (never across protocols)
@@ -201,7 +224,7 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
             c = _cell(res, rids, res.resolve(m, pr), mixed, f"{sc}/{_combo_text(keys, group[0])}", _spec_for(m))
             by[(sc, m)] = c
             cells.append(c)
-        for pr, m, scs in mean_groups:
+        for _pr, m, scs in mean_groups:
             cells.append(mean_of_cells([by[(sc, m)] for sc in scs], scs, _spec_for(m).decimals))
         group_ids = [r for r in ids if any(_same_combo(tuple(_get(res, r, k) for k in keys), c) for c in group)]
         reasons = list(dict.fromkeys(why for r in group_ids for why in run_dropped(res, r).values()))

@@ -17,14 +17,19 @@ from gsbench.collect import collect, read_collected, write_collected
 from gsbench.errors import InputError
 from gsbench.reports import html as html_mod
 from gsbench.reports import plots, shares
-from gsbench.reports.data import MAIN_STUDIES, Results, is_null
-from gsbench.reports.spec import STUDIES
 from gsbench.reports.ablations import (
-    depth_formulation_table, latent_diff_table, loss_subsets_table, method_diff_table, noise_table, ordering_table,
+    depth_formulation_table,
+    latent_diff_table,
+    loss_subsets_table,
+    method_diff_table,
+    noise_table,
+    ordering_table,
     other_study_tables,
 )
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.claims import claims_table
+from gsbench.reports.data import MAIN_STUDIES, Results, is_null
+from gsbench.reports.spec import STUDIES
 from gsbench.reports.studies import reconstruction_table, removal_table, semantic_table
 from gsbench.reports.sweeps import lambda_table, latent_dim_tables
 from gsbench.reports.table import Table

@@ -9,10 +9,17 @@ from gsbench.reports.data import Results, is_null, same
 from gsbench.reports.spec import AX_LAMBDAS, AX_LATENT, method_label
 from gsbench.reports.stats import pearson, pearson_interval
 from gsbench.reports.studies import (
-    PROTOCOL_SHORT, _axis_label, _cell, _finish, _get, _slug, _spec_for, runs_of, scene_protocols,
+    PROTOCOL_SHORT,
+    _axis_label,
+    _cell,
+    _finish,
+    _get,
+    _slug,
+    _spec_for,
+    runs_of,
+    scene_protocols,
 )
 from gsbench.reports.table import Cell, Column, Row, Table, _mark, _tex
-
 
 # ---------------------------------------------------------------------------- latent d
 LATENT_ROWS = ["train_s", "peak_rss_mb", "miou", "psnr"]
@@ -95,7 +102,7 @@ def lambda_table(res: Results) -> list[Table]:
         return []
     pairs = scene_protocols(res, ids)
     columns = []
-    for sc, pr in pairs:
+    for sc, _pr in pairs:
         for m, lab in (("miou", "r with mIoU"), ("psnr", "r with PSNR")):
             columns.append(Column(m, lab, lab, None, group=sc if len(pairs) > 1 else None))
     rows = []

@@ -106,7 +106,7 @@ class Table:
         for j, col in enumerate(self.columns):
             by_metric.setdefault(col.metric, []).append(j)
         for r in self.rows:
-            for metric, js in by_metric.items():
+            for js in by_metric.values():
                 _mark([r.cells[j] for j in js], self.columns[js[0]].better)
 
     # ---------------------------------------------------------------- renderers
@@ -149,7 +149,7 @@ class Table:
         nl = len(self.label_headers)
         spans = self._group_spans()
         colspec = "c" * nl if self.label_is_check else "l" * nl
-        for g, k, _ in spans:
+        for _g, k, _ in spans:
             colspec += "|" + "c" * k
         ncols = nl + len(self.columns)
         out = ["\\begin{table}[ht]", "\\centering",

@@ -259,16 +259,16 @@ def test_every_rule_names_a_key_of_default_yaml_and_shipped_configs_pass():
 
 def test_declared_choices_agree_with_the_code_that_consumes_them():
     from gsbench.datasets.noise import NOISE_KINDS, SEVERITIES
+    from gsbench.datasets.splits import HOLDOUT_CHOICES
+    from gsbench.evaluation.frames import RESOLUTIONS
     from gsbench.evaluation.segmentation import PROTOCOLS
     from gsbench.methods.losses import DEPTH_FORMULATIONS
+    from gsbench.metrics.lerf import LERF_KERNEL_MODES
+    from gsbench.metrics.perceptual import LPIPS_RANGES
     from gsbench.priors.depth import DEPTH_PROVIDERS
     from gsbench.priors.features import FEATURE_PROVIDERS
     from gsbench.priors.ordering import ORDERINGS
     from gsbench.priors.pipeline import MASK_PROVIDERS, PROPAGATORS
-    from gsbench.datasets.splits import HOLDOUT_CHOICES
-    from gsbench.evaluation.frames import RESOLUTIONS
-    from gsbench.metrics.lerf import LERF_KERNEL_MODES
-    from gsbench.metrics.perceptual import LPIPS_RANGES
     from gsbench.render import BACKENDS
     assert set(config_keys.HOLDOUTS) == set(HOLDOUT_CHOICES)
     assert set(config_keys.EVAL_RESOLUTIONS) == set(RESOLUTIONS)

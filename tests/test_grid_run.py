@@ -19,6 +19,7 @@ from gsbench import grids
 from gsbench.grids.executors import SerialExecutor
 from gsbench.store import read_json, write_json_atomic
 
+
 @pytest.fixture
 def own_tmp():
     """A temp folder outside pytest's basetemp: concurrent pytest sessions on a shared machine rotate

@@ -13,14 +13,19 @@ from PIL import Image
 
 from gsbench.cli import main
 from gsbench.collect import collect, read_collected, write_collected
+from gsbench.reports.build import build_tables
 from gsbench.reports.data import Results
 from gsbench.reports.plots import pareto_front, train_curve
-from gsbench.reports.build import build_tables
 from gsbench.reports.stats import pearson
 from gsbench.reports.studies import reconstruction_table
 from gsbench.reports.table import Cell, Column, Row, Table
 from tests.test_report_synthetic import (
-    LAMBDA_DEPTH, LAMBDA_SEM, lambda_miou, make_all, make_main, write_run,
+    LAMBDA_DEPTH,
+    LAMBDA_SEM,
+    lambda_miou,
+    make_all,
+    make_main,
+    write_run,
 )
 
 

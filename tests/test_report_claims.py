@@ -6,14 +6,21 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from test_report_synthetic import write_run
 
 from gsbench.collect import collect, config_key
 from gsbench.reports.ablations import loss_subsets_table, parse_dropped
 from gsbench.reports.claims import (
-    INCONCLUSIVE, NOT_RUN, NOT_TESTABLE, OPPOSITE, PAPER_CLAIMS, REPRODUCED, claims_table, verdict,
+    INCONCLUSIVE,
+    NOT_RUN,
+    NOT_TESTABLE,
+    OPPOSITE,
+    PAPER_CLAIMS,
+    REPRODUCED,
+    claims_table,
+    verdict,
 )
 from gsbench.reports.data import Results
-from test_report_synthetic import write_run
 
 SEED_NOISE = [0.0, 0.3, -0.2]  # shared by both rows of a seed: pairing removes it
 

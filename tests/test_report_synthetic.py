@@ -89,10 +89,10 @@ def make_ablations(root: Path) -> None:
                   curve=[(5.0, {"psnr": p - 3, "miou_3dovs": mi - 0.2}), (20.0 + 10 * d, {"psnr": p, "miou_3dovs": mi})])
     forms = {"none": (20.0, 0.300), "raw_l1": (21.31, 0.246), "minmax": (23.93, 0.184),
              "scale_shift": (24.81, 0.184), "pearson": (24.0, 0.190)}
-    for f, (p, l) in forms.items():
+    for f, (p, lp) in forms.items():
         write_run(root, f"form/{f}", method="gaussiands", scene="bench", study="depth_formulation",
                   grid={"gaussiands.depth_formulation": f},
-                  metrics={"psnr": p, "lpips": l, "ssim": 0.7, "miou_3dovs": 0.9, "mbiou_3dovs": 0.8})
+                  metrics={"psnr": p, "lpips": lp, "ssim": 0.7, "miou_3dovs": 0.9, "mbiou_3dovs": 0.8})
     for o, (dist, iou) in {"random": (5.0, 0.3392), "filename": (2.03, 0.5085), "pose": (1.5, 0.5321)}.items():
         write_run(root, f"ord/{o}", method="gaussiands", scene="bench", study="ordering", grid={"priors.ordering": o},
                   metrics={"ordering_adjacent_distance": dist, "ordering_adjacent_mask_iou": iou, "psnr": 24.0})
