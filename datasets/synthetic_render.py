@@ -75,7 +75,9 @@ def _intersect(p: Prim, o: np.ndarray, D: np.ndarray, eps: float = 1e-6) -> np.n
         c = ox * ox + oy * oy - r * r
         disc = b * b - 4 * a * c
         with np.errstate(divide="ignore", invalid="ignore"):
-            ts = np.where((disc >= 0) & (a > 1e-12), (-b - np.sqrt(np.maximum(disc, 0))) / (2 * np.maximum(a, 1e-12)), np.inf)
+            ts = np.where(
+                (disc >= 0) & (a > 1e-12), (-b - np.sqrt(np.maximum(disc, 0))) / (2 * np.maximum(a, 1e-12)), np.inf
+            )
         zs = o[2] + ts * D[:, 2]
         ts = np.where((ts > eps) & (zs >= 0) & (zs <= h), ts, np.inf)
         tc = _safe_div(np.full(len(D), h - o[2]), D[:, 2])

@@ -150,7 +150,9 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
     def default_sort(combo: tuple) -> tuple:
         out = []
         for k, v in zip(keys, combo):
-            out.append((METHOD_ORDER.index(v) if v in METHOD_ORDER else 9, str(v)) if k == "method" else _axis_rank(k, v))
+            out.append(
+                (METHOD_ORDER.index(v) if v in METHOD_ORDER else 9, str(v)) if k == "method" else _axis_rank(k, v)
+            )
         return tuple(out)
 
     n_method = 1 if len(methods) > 1 else 0
@@ -231,7 +233,9 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
         if len(group) > 1:
             labels[-1] += " (merged: " + ("; ".join(reasons) or "same resolved config") + ")"
         if any_dropped:
-            labels.append("; ".join(dict.fromkeys(f"{k}: {v}" for r in group_ids for k, v in run_dropped(res, r).items())))
+            labels.append(
+                "; ".join(dict.fromkeys(f"{k}: {v}" for r in group_ids for k, v in run_dropped(res, r).items()))
+            )
         rows.append(Row(labels, cells, label_checks=checks_l if plain_checks else None))
         row_groups.append(group)
     heads = (["Method"] if n_method else []) + label_headers + [k.replace("axis.", "") for k in extra]
@@ -343,8 +347,16 @@ def noise_table(res: Results) -> list[Table]:
 def method_diff_table(res: Results) -> list[Table]:
     """The reconstruction grid's methods against GaussianDS (difference table only: the values are in
     Tables I-III)."""
-    ts = ablation_table(res, "reconstruction", "reconstruction_methods", "Methods", "Methods of the reconstruction grid.",
-                        [], [], ["psnr", "ssim", "lpips", "miou", "mbiou"])
+    ts = ablation_table(
+        res,
+        "reconstruction",
+        "reconstruction_methods",
+        "Methods",
+        "Methods of the reconstruction grid.",
+        [],
+        [],
+        ["psnr", "ssim", "lpips", "miou", "mbiou"],
+    )
     return [t for t in ts if t.id.endswith("_diff")]
 
 

@@ -197,7 +197,9 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
         pairs = scene_protocols(res, ids) if ids else []
         paper = (f"{c.paper:+.2f}" if c.paper is not None else "–") + (f" ({c.paper_note})" if c.paper_note else "")
         if not pairs:
-            rows.append(Row([c.text, c.source, "–"], [Cell(text=paper), Cell(text="study not run"), Cell(text=NOT_RUN)]))
+            rows.append(
+                Row([c.text, c.source, "–"], [Cell(text=paper), Cell(text="study not run"), Cell(text=NOT_RUN)])
+            )
             continue
         for sc, pr in pairs:
             text, v = measure(res, c, sc, pr)

@@ -211,7 +211,9 @@ def removal_table(res: Results) -> list[Table]:
                                "share of object pixels left and PSNR outside the object.")
 
 
-def _method_scene_table(res: Results, ids: list[str], metrics: list[str], tid: str, title: str, caption: str) -> list[Table]:
+def _method_scene_table(
+    res: Results, ids: list[str], metrics: list[str], tid: str, title: str, caption: str
+) -> list[Table]:
     pairs = scene_protocols(res, ids)
     columns = []
     for sc, _pr in pairs:

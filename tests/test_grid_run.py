@@ -65,8 +65,10 @@ def test_skip_failed_retry_and_stale(tmp_path, monkeypatch):
     assert sorted(rep.dispatched) == sorted(ids) and sorted(calls) == sorted(ids)
     st = read_json(out / ids[1] / grids.CELL_STATUS_FILE)
     assert st["state"] == "failed" and "simulated failure" in st["error"] and "Traceback" in st["traceback"]
-    failed_res = read_json(out / ids[1] / "results.json")     # a failure record for the reports
-    assert failed_res["status"] == "failed" and any("simulated failure" in why for why in failed_res["skipped"].values())
+    failed_res = read_json(out / ids[1] / "results.json")  # a failure record for the reports
+    assert failed_res["status"] == "failed" and any(
+        "simulated failure" in why for why in failed_res["skipped"].values()
+    )
 
     # re-run: finished cells and the failed one are left alone
     calls.clear()
