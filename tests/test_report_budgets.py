@@ -6,12 +6,12 @@ import json
 from pathlib import Path
 
 from PIL import Image
-from test_report_synthetic import write_run
 
 from gsbench.collect import collect
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.data import Results
 from gsbench.reports.shares import mean_shares, read_shares
+from tests.test_report_synthetic import write_run
 
 
 def _budget_runs(root: Path) -> None:

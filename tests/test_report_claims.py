@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from test_report_synthetic import write_run
 
 from gsbench.collect import collect, config_key
 from gsbench.reports.ablations import loss_subsets_table, parse_dropped
@@ -21,6 +20,7 @@ from gsbench.reports.claims import (
     verdict,
 )
 from gsbench.reports.data import Results
+from tests.test_report_synthetic import write_run
 
 SEED_NOISE = [0.0, 0.3, -0.2]  # shared by both rows of a seed: pairing removes it
 
