@@ -44,7 +44,9 @@ class Scene:
     depth_loader: Optional[Callable[[int], np.ndarray]] = None
     classes_loader: Optional[Callable[[int], np.ndarray]] = None
     instances_loader: Optional[Callable[[int], np.ndarray]] = None
-    labels_loader: Optional[Callable[[int], Optional[list]]] = None  # LERF: list[LabelObject] or None (no label file for view)
+    labels_loader: Optional[Callable[[int], Optional[list]]] = (
+        None  # LERF: list[LabelObject] or None (no label file for view)
+    )
     removal_loader: Optional[Callable[[int, int], Optional[np.ndarray]]] = None  # (view, instance id) -> RGB without it
     instance_classes: dict = field(default_factory=dict)  # instance id -> class index (synthetic scenes)
     queries: list[str] = field(default_factory=list)      # LERF-OVS text queries of the scene

@@ -71,7 +71,8 @@ def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, 
     if distorted:
         meta["distorted_images"] = len(distorted)
         warnings.warn(f"{model_dir}: {len(distorted)} images use a distorted camera model; gsbench renders "
-                      "pinhole cameras, so undistort the images (colmap image_undistorter) for exact results")
+                      "pinhole cameras, so undistort the images (colmap image_undistorter) for exact results",
+                      stacklevel=2)
     points = colors = None
     if rec.num_points3D() > 0:
         pts = sorted(rec.points3D.items())

@@ -82,7 +82,9 @@ def read_rgb(path: Path, expect_size: tuple[int, int] | None = None, background:
         raise InputError(f"{path}: unsupported channel count {img.shape[2]}")
     img = np.ascontiguousarray(img, dtype=np.float32)
     if expect_size is not None and (img.shape[1], img.shape[0]) != tuple(expect_size):
-        raise InputError(f"{path}: image is {img.shape[1]}x{img.shape[0]}, camera says {expect_size[0]}x{expect_size[1]}")
+        raise InputError(
+            f"{path}: image is {img.shape[1]}x{img.shape[0]}, camera says {expect_size[0]}x{expect_size[1]}"
+        )
     return img
 
 

@@ -37,7 +37,9 @@ def opencv_to_llff_c2w(c2w: np.ndarray) -> np.ndarray:
     return m
 
 
-def read_poses_bounds(path: Path, image_sizes: list[tuple[int, int]], names: list[str]) -> tuple[list[Camera], np.ndarray]:
+def read_poses_bounds(
+    path: Path, image_sizes: list[tuple[int, int]], names: list[str]
+) -> tuple[list[Camera], np.ndarray]:
     """Cameras (scaled to the actual image sizes) and the (N, 2) near/far bounds."""
     path = Path(path)
     arr = read_npy(path)
@@ -66,7 +68,11 @@ def write_poses_bounds(path: Path, cameras: list[Camera], bounds: np.ndarray) ->
     """Write cameras with fx == fy and a centred principal point (what LLFF can express)."""
     rows = []
     for cam in cameras:
-        if abs(cam.fx - cam.fy) > 1e-9 * cam.fx or abs(cam.cx - cam.width / 2) > 1e-9 or abs(cam.cy - cam.height / 2) > 1e-9:
+        if (
+            abs(cam.fx - cam.fy) > 1e-9 * cam.fx
+            or abs(cam.cx - cam.width / 2) > 1e-9
+            or abs(cam.cy - cam.height / 2) > 1e-9
+        ):
             raise ValueError(f"camera {cam.name}: LLFF needs fx == fy and a centred principal point")
         m = np.zeros((3, 5))
         m[:, :4] = opencv_to_llff_c2w(cam.camera_to_world)

@@ -43,7 +43,9 @@ def _line_kernel(length: int, angle: float) -> np.ndarray:
     return k / k.sum()
 
 
-def apply_noise(depth: np.ndarray, valid: np.ndarray, kind: str, severity: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def apply_noise(
+    depth: np.ndarray, valid: np.ndarray, kind: str, severity: int, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Perturbed depth (same dtype and shape) and its valid mask; severity 0 returns copies."""
     if kind not in NOISE_KINDS:
         raise InputError(f"unknown noise kind {kind!r}; choose one of {', '.join(NOISE_KINDS)}")

@@ -168,7 +168,9 @@ def scale_labels(objs: list[LabelObject], sx: float, sy: float) -> list[LabelObj
     out = []
     for o in objs:
         bbox = None if o.bbox is None else (o.bbox[0] * sx, o.bbox[1] * sy, o.bbox[2] * sx, o.bbox[3] * sy)
-        out.append(LabelObject(o.category, [p * s for p in o.polygons], bbox, None if o.area is None else o.area * sx * sy))
+        out.append(
+            LabelObject(o.category, [p * s for p in o.polygons], bbox, None if o.area is None else o.area * sx * sy)
+        )
     return out
 
 

@@ -131,8 +131,11 @@ def _write(spec: SceneSpec, root: Path, scene_name: str, preset: str, seed: int,
         cmap = np.where(r["instances"] >= 0, lut[r["instances"]], -1)
         if layout in ("both", "3dovs"):
             for k, c in enumerate(classes):
-                write_png(root / "segmentations" / f"{i:03d}" / f"{c}.png", np.where(cmap == k, 255, 0).astype(np.uint8),
-                          atomic=False)
+                write_png(
+                    root / "segmentations" / f"{i:03d}" / f"{c}.png",
+                    np.where(cmap == k, 255, 0).astype(np.uint8),
+                    atomic=False,
+                )
         if layout in ("both", "lerf"):
             write_json_atomic(root / "label" / scene_name / f"{stems[i]}.json",
                               _label_json(names[i], W, H, cmap, classes, label_classes))

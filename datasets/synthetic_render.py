@@ -10,6 +10,7 @@ from gsbench.scene import Camera
 
 from .synthetic_spec import AMBIENT, FAR, LIGHTS, WALL_Y, Decal, Prim, SceneSpec
 
+
 def camera_rays(cam: Camera) -> tuple[np.ndarray, np.ndarray]:
     """Origin (3,) and world directions (H*W, 3) with camera-space z = 1 (ray parameter = depth)."""
     jj, ii = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
@@ -74,7 +75,9 @@ def _intersect(p: Prim, o: np.ndarray, D: np.ndarray, eps: float = 1e-6) -> np.n
         c = ox * ox + oy * oy - r * r
         disc = b * b - 4 * a * c
         with np.errstate(divide="ignore", invalid="ignore"):
-            ts = np.where((disc >= 0) & (a > 1e-12), (-b - np.sqrt(np.maximum(disc, 0))) / (2 * np.maximum(a, 1e-12)), np.inf)
+            ts = np.where(
+                (disc >= 0) & (a > 1e-12), (-b - np.sqrt(np.maximum(disc, 0))) / (2 * np.maximum(a, 1e-12)), np.inf
+            )
         zs = o[2] + ts * D[:, 2]
         ts = np.where((ts > eps) & (zs >= 0) & (zs <= h), ts, np.inf)
         tc = _safe_div(np.full(len(D), h - o[2]), D[:, 2])

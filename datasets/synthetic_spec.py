@@ -18,11 +18,33 @@ GENERATOR_VERSION = 1
 
 PRESETS: dict[str, dict] = {
     # tests and the demo: small enough for CPU training in minutes
-    "tabletop-small": dict(objects=(4, 5), views=24, resolution=(128, 96), decals=("poster",), path="arc",
-                           arc_deg=110.0, elevation_deg=(24.0, 38.0), radius=(1.75, 2.0), hfov_deg=55.0, points=4000, area=(0.55, 0.4)),
+    "tabletop-small": dict(
+        objects=(4, 5),
+        views=24,
+        resolution=(128, 96),
+        decals=("poster",),
+        path="arc",
+        arc_deg=110.0,
+        elevation_deg=(24.0, 38.0),
+        radius=(1.75, 2.0),
+        hfov_deg=55.0,
+        points=4000,
+        area=(0.55, 0.4),
+    ),
     # benchmarks: more objects, a second decal, hemisphere cameras
-    "room-medium": dict(objects=(7, 8), views=60, resolution=(320, 240), decals=("poster", "rug"), path="hemisphere",
-                        arc_deg=150.0, elevation_deg=(18.0, 55.0), radius=(2.1, 2.6), hfov_deg=60.0, points=20000, area=(0.8, 0.55)),
+    "room-medium": dict(
+        objects=(7, 8),
+        views=60,
+        resolution=(320, 240),
+        decals=("poster", "rug"),
+        path="hemisphere",
+        arc_deg=150.0,
+        elevation_deg=(18.0, 55.0),
+        radius=(2.1, 2.6),
+        hfov_deg=60.0,
+        points=20000,
+        area=(0.8, 0.55),
+    ),
 }
 
 # class name, shape, colour 1, colour 2, pattern
@@ -96,7 +118,9 @@ def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
     return w2c
 
 
-def compose(preset: str, seed: int = 0, views: int | None = None, resolution: tuple[int, int] | None = None) -> SceneSpec:
+def compose(
+    preset: str, seed: int = 0, views: int | None = None, resolution: tuple[int, int] | None = None
+) -> SceneSpec:
     """Seeded scene layout and cameras for a preset (no rendering)."""
     if preset not in PRESETS:
         raise InputError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
@@ -143,7 +167,9 @@ def compose(preset: str, seed: int = 0, views: int | None = None, resolution: tu
         prims.append(Prim(shape, name, inst, np.array([x, y, z]), size, float(rng.uniform(0, np.pi)),
                           (c1, c2), pattern, float(rng.uniform(0.04, 0.08))))
     n = len(prims)
-    prims.append(Prim("floor", "floor", n, colors=((0.74, 0.64, 0.50), (0.60, 0.50, 0.38)), pattern="checker", period=0.3))
+    prims.append(
+        Prim("floor", "floor", n, colors=((0.74, 0.64, 0.50), (0.60, 0.50, 0.38)), pattern="checker", period=0.3)
+    )
     prims.append(Prim("wall", "wall", n + 1, colors=((0.86, 0.83, 0.76), (0.76, 0.79, 0.82)), pattern="wallstripes",
                       period=0.3))
     decals: list[Decal] = []

@@ -41,8 +41,11 @@ def _global_flags(suppress: bool) -> argparse.ArgumentParser:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="gsbench", description="Benchmark harness for semantic 3D Gaussian Splatting.",
-                                     parents=[_global_flags(suppress=False)])
+    parser = argparse.ArgumentParser(
+        prog="gsbench",
+        description="Benchmark harness for semantic 3D Gaussian Splatting.",
+        parents=[_global_flags(suppress=False)],
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module, help_text) in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text, parents=[_global_flags(suppress=True)])

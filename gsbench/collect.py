@@ -172,7 +172,9 @@ def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
         "seed": seed,
         "status": status,
         "protocol": res.get("protocol"),
-        "protocols": ",".join(str(p) for p in res.get("protocols") or ([res["protocol"]] if res.get("protocol") else [])),
+        "protocols": ",".join(
+            str(p) for p in res.get("protocols") or ([res["protocol"]] if res.get("protocol") else [])
+        ),
         "backend": res.get("backend"),
         "provider.depth": providers.get("depth"),
         "provider.masks": providers.get("masks"),
@@ -277,7 +279,11 @@ def collect(runs_dir: str | Path) -> pd.DataFrame:
     df["seed"] = df["seed"].astype("Int64")
     for c in df.columns:
         if c.startswith(("machine.", "provider.", "env.", "requested.")):
-            df[c] = df[c].map(lambda v: None if v is None or (isinstance(v, float) and math.isnan(v)) else str(v)).astype(object)
+            df[c] = (
+                df[c]
+                .map(lambda v: None if v is None or (isinstance(v, float) and math.isnan(v)) else str(v))
+                .astype(object)
+            )
         elif c not in ("value", "seed") and not c.startswith("axis."):
             df[c] = _objects(df[c])
     df.attrs["warnings"] = warnings

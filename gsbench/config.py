@@ -8,8 +8,9 @@ This module is the one path by which a value enters a config: `gsbench train --s
 ablate --set`, presets and grid files (base.set, axes, sweeps, extra cells) all go through
 `parse_overrides` (strings or mappings -> {dotted key: value}) and `check_value` / `apply_overrides`
 (key known, type as in default.yaml, range or choices as in gsbench/config_keys.py). Values are
-read by one YAML reader (`load_yaml`), which reads `1e-4` as a number (YAML 1.1 would read a string). Unknown keys are an error with close-match suggestions (a typo must not silently do
-nothing). A preset is a shipped name (gsbench/configs/<name>.yaml) or a path to a YAML file.
+read by one YAML reader (`load_yaml`), which reads `1e-4` as a number (YAML 1.1 would read a string).
+Unknown keys are an error with close-match suggestions (a typo must not silently do nothing).
+A preset is a shipped name (gsbench/configs/<name>.yaml) or a path to a YAML file.
 """
 from __future__ import annotations
 
@@ -266,5 +267,21 @@ def resolve_for_scene(config: dict, scene) -> tuple[dict, dict]:
     return resolve(config, scene)
 
 
-__all__ = ["load_config", "load_tree", "run_id", "resolve_for_scene", "parse_overrides", "apply_overrides",
-           "check_value", "load_yaml", "set_args", "validate", "preset_path", "default_tree", "flatten", "get_dotted", "set_dotted", "METHODS"]
+__all__ = [
+    "load_config",
+    "load_tree",
+    "run_id",
+    "resolve_for_scene",
+    "parse_overrides",
+    "apply_overrides",
+    "check_value",
+    "load_yaml",
+    "set_args",
+    "validate",
+    "preset_path",
+    "default_tree",
+    "flatten",
+    "get_dotted",
+    "set_dotted",
+    "METHODS",
+]

@@ -127,7 +127,7 @@ def resize_nearest(a: Any, width: int, height: int) -> np.ndarray:
     if arr.shape == (height, width):
         return arr
     dtype = arr.dtype
-    src = arr.astype(np.uint8) if dtype == bool else arr
+    src = arr.astype(np.uint8) if dtype == np.bool_ else arr
     if src.dtype in (np.int64, np.uint32, np.uint64):
         src = src.astype(np.int32)
     out = cv2.resize(src, (int(width), int(height)), interpolation=cv2.INTER_NEAREST_EXACT)

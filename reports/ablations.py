@@ -11,13 +11,36 @@ from typing import Any, Callable
 from gsbench.collect import config_key
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, same
 from gsbench.reports.spec import (
-    AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_ORDERING, LOSS_SUBSET_ORDER,
-    METHOD_ORDER, REFERENCE_TEXT, STUDIES, STUDY_REFERENCE, method_label, metric_spec,
+    AX_FORMULATION,
+    AX_LATENT,
+    AX_LOSSES,
+    AX_NOISE_SEVERITY,
+    AX_NOISE_TYPE,
+    AX_ORDERING,
+    LOSS_SUBSET_ORDER,
+    METHOD_ORDER,
+    REFERENCE_TEXT,
+    STUDIES,
+    STUDY_REFERENCE,
+    method_label,
+    metric_spec,
 )
 from gsbench.reports.stats import compare
 from gsbench.reports.studies import (
-    PROTOCOL_ORDER, PROTOCOL_SHORT, _axis_label, _axis_rank, _cell, _combo_text, _eq_filter, _finish, _get,
-    _slug, _spec_for, ordered_methods, runs_of, scene_protocols,
+    PROTOCOL_ORDER,
+    PROTOCOL_SHORT,
+    _axis_label,
+    _axis_rank,
+    _cell,
+    _combo_text,
+    _eq_filter,
+    _finish,
+    _get,
+    _slug,
+    _spec_for,
+    ordered_methods,
+    runs_of,
+    scene_protocols,
 )
 from gsbench.reports.table import CHECK, Cell, Column, Row, Table
 
@@ -127,7 +150,9 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
     def default_sort(combo: tuple) -> tuple:
         out = []
         for k, v in zip(keys, combo):
-            out.append((METHOD_ORDER.index(v) if v in METHOD_ORDER else 9, str(v)) if k == "method" else _axis_rank(k, v))
+            out.append(
+                (METHOD_ORDER.index(v) if v in METHOD_ORDER else 9, str(v)) if k == "method" else _axis_rank(k, v)
+            )
         return tuple(out)
 
     n_method = 1 if len(methods) > 1 else 0
@@ -153,7 +178,7 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
         return []
     multi = len(pairs) > 1
     columns = []
-    for sc, pr, m in group_cols:
+    for sc, _pr, m in group_cols:
         sp = _spec_for(m)
         columns.append(Column(m, sp.label, sp.latex, sp.better, group=sc if multi else None))
     # mean over the scenes of one protocol (never across protocols)
@@ -201,14 +226,16 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
             c = _cell(res, rids, res.resolve(m, pr), mixed, f"{sc}/{_combo_text(keys, group[0])}", _spec_for(m))
             by[(sc, m)] = c
             cells.append(c)
-        for pr, m, scs in mean_groups:
+        for _pr, m, scs in mean_groups:
             cells.append(mean_of_cells([by[(sc, m)] for sc in scs], scs, _spec_for(m).decimals))
         group_ids = [r for r in ids if any(_same_combo(tuple(_get(res, r, k) for k in keys), c) for c in group)]
         reasons = list(dict.fromkeys(why for r in group_ids for why in run_dropped(res, r).values()))
         if len(group) > 1:
             labels[-1] += " (merged: " + ("; ".join(reasons) or "same resolved config") + ")"
         if any_dropped:
-            labels.append("; ".join(dict.fromkeys(f"{k}: {v}" for r in group_ids for k, v in run_dropped(res, r).items())))
+            labels.append(
+                "; ".join(dict.fromkeys(f"{k}: {v}" for r in group_ids for k, v in run_dropped(res, r).items()))
+            )
         rows.append(Row(labels, cells, label_checks=checks_l if plain_checks else None))
         row_groups.append(group)
     heads = (["Method"] if n_method else []) + label_headers + [k.replace("axis.", "") for k in extra]
@@ -321,8 +348,16 @@ def noise_table(res: Results) -> list[Table]:
 def method_diff_table(res: Results) -> list[Table]:
     """The reconstruction grid's methods against GaussianDS (difference table only: the values are in
     Tables I-III)."""
-    ts = ablation_table(res, "reconstruction", "reconstruction_methods", "Methods", "Methods of the reconstruction grid.",
-                        [], [], ["psnr", "ssim", "lpips", "miou", "mbiou"])
+    ts = ablation_table(
+        res,
+        "reconstruction",
+        "reconstruction_methods",
+        "Methods",
+        "Methods of the reconstruction grid.",
+        [],
+        [],
+        ["psnr", "ssim", "lpips", "miou", "mbiou"],
+    )
     return [t for t in ts if t.id.endswith("_diff")]
 
 

@@ -17,14 +17,19 @@ from gsbench.collect import collect, read_collected, write_collected
 from gsbench.errors import InputError
 from gsbench.reports import html as html_mod
 from gsbench.reports import plots, shares
-from gsbench.reports.data import MAIN_STUDIES, Results, is_null
-from gsbench.reports.spec import STUDIES
 from gsbench.reports.ablations import (
-    depth_formulation_table, latent_diff_table, loss_subsets_table, method_diff_table, noise_table, ordering_table,
+    depth_formulation_table,
+    latent_diff_table,
+    loss_subsets_table,
+    method_diff_table,
+    noise_table,
+    ordering_table,
     other_study_tables,
 )
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.claims import claims_table
+from gsbench.reports.data import MAIN_STUDIES, Results, is_null
+from gsbench.reports.spec import STUDIES
 from gsbench.reports.studies import reconstruction_table, removal_table, semantic_table
 from gsbench.reports.sweeps import lambda_table, latent_dim_tables
 from gsbench.reports.table import Table
@@ -36,8 +41,12 @@ _SECTION_OF = [
     ("ordering", "ordering"), ("depth_formulation", "depth_formulation"), ("loss_subsets", "loss_subsets"),
     ("latent_dim", "latent_dim"), ("lambda_", "lambda_grid"), ("depth_noise", "depth_noise"),
 ]
-_SECTION_TITLES = {"main": "Main results (reconstruction and segmentation)", **{k: v for k, v in STUDIES.items() if k != "reconstruction"},
-                   "claims": "Paper claims: reproduced or not", "budgets": "Training budget per method"}
+_SECTION_TITLES = {
+    "main": "Main results (reconstruction and segmentation)",
+    **{k: v for k, v in STUDIES.items() if k != "reconstruction"},
+    "claims": "Paper claims: reproduced or not",
+    "budgets": "Training budget per method",
+}
 _NO_BARS = ("latent_dim", "lambda_pearson", "paper_claims", "budgets")
 
 
@@ -118,7 +127,9 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
             p = plots.plot_table_bars(t, plot_dir / f"bars_{t.id}.png")
             if p:
                 summary.plots.append(p)
-                sec.figures.append((p.relative_to(out_dir).as_posix(), f"{t.title}: bars per row; error bars = std over seeds."))
+                sec.figures.append(
+                    (p.relative_to(out_dir).as_posix(), f"{t.title}: bars per row; error bars = std over seeds.")
+                )
 
     # error against run time, one figure per study
     studies = res.studies()
@@ -136,14 +147,22 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         sec.notes += notes
         if p:
             summary.plots.append(p)
-            sec.figures.append((p.relative_to(out_dir).as_posix(),
-                                "Error against run time: lines = PSNR / mIoU of the periodic evaluations in train_log.jsonl over "
-                                "the optimiser's wall clock; dots = final results vs total training time (train_s, which "
-                                "also counts priors and set-up, so dots can sit right of the lines' ends); dashed = Pareto "
-                                "front of final value vs total time (one per scene)."))
+            sec.figures.append(
+                (
+                    p.relative_to(out_dir).as_posix(),
+                    "Error against run time: lines = PSNR / mIoU of the periodic evaluations in train_log.jsonl over "
+                    "the optimiser's wall clock; dots = final results vs total training time (train_s, which "
+                    "also counts priors and set-up, so dots can sit right of the lines' ends); dashed = Pareto "
+                    "front of final value vs total time (one per scene).",
+                )
+            )
         else:
-            sec.notes.append("No time curve: the runs have neither periodic evaluations nor final values with a training time.")
-        p, notes = shares.plot_loss_shares(res, st if key != "main" else None, ids, plot_dir / f"shares_{_slug(key)}.png")
+            sec.notes.append(
+                "No time curve: the runs have neither periodic evaluations nor final values with a training time."
+            )
+        p, notes = shares.plot_loss_shares(
+            res, st if key != "main" else None, ids, plot_dir / f"shares_{_slug(key)}.png"
+        )
         sec.notes += notes
         if p:
             summary.plots.append(p)
@@ -153,13 +172,21 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
 
     for p in plots.plot_lambda_surfaces(res, plot_dir / "lambda_surfaces"):
         summary.plots.append(p)
-        section("lambda_grid").figures.append((p.relative_to(out_dir).as_posix(),
-                                               "Lambda response surfaces: mean mIoU per pair of lambdas (others averaged), "
-                                               "Pearson r of each lambda with mIoU in the axis labels."))
+        section("lambda_grid").figures.append(
+            (
+                p.relative_to(out_dir).as_posix(),
+                "Lambda response surfaces: mean mIoU per pair of lambdas (others averaged), "
+                "Pearson r of each lambda with mIoU in the axis labels.",
+            )
+        )
     for p in plots.plot_noise(res, plot_dir / "noise"):
         summary.plots.append(p)
-        section("depth_noise").figures.append((p.relative_to(out_dir).as_posix(),
-                                               "Metric vs depth-noise severity per perturbation kind (severity 0 = clean run)."))
+        section("depth_noise").figures.append(
+            (
+                p.relative_to(out_dir).as_posix(),
+                "Metric vs depth-noise severity per perturbation kind (severity 0 = clean run).",
+            )
+        )
     for p in plots.plot_latent(res, plot_dir / "latent_dim"):
         summary.plots.append(p)
         section("latent_dim").figures.append((p.relative_to(out_dir).as_posix(),

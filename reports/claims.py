@@ -20,7 +20,13 @@ from typing import Any
 from gsbench.reports.ablations import _covered, run_dropped
 from gsbench.reports.data import Results, same
 from gsbench.reports.spec import (
-    AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_ORDERING, metric_spec,
+    AX_FORMULATION,
+    AX_LATENT,
+    AX_LOSSES,
+    AX_NOISE_SEVERITY,
+    AX_NOISE_TYPE,
+    AX_ORDERING,
+    metric_spec,
 )
 from gsbench.reports.stats import Diff, compare, pearson, pearson_interval
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
@@ -191,7 +197,9 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
         pairs = scene_protocols(res, ids) if ids else []
         paper = (f"{c.paper:+.2f}" if c.paper is not None else "–") + (f" ({c.paper_note})" if c.paper_note else "")
         if not pairs:
-            rows.append(Row([c.text, c.source, "–"], [Cell(text=paper), Cell(text="study not run"), Cell(text=NOT_RUN)]))
+            rows.append(
+                Row([c.text, c.source, "–"], [Cell(text=paper), Cell(text="study not run"), Cell(text=NOT_RUN)])
+            )
             continue
         for sc, pr in pairs:
             text, v = measure(res, c, sc, pr)

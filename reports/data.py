@@ -103,7 +103,9 @@ class Results:
         if not run_ids:
             return Cell(decimals=spec.decimals)
         if metric is None:
-            return Cell(decimals=spec.decimals, total=len(run_ids), reason=missing_reason or "not defined for this protocol")
+            return Cell(
+                decimals=spec.decimals, total=len(run_ids), reason=missing_reason or "not defined for this protocol"
+            )
         vals: list[float] = []
         reasons: list[str] = []
         for rid in run_ids:

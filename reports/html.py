@@ -42,21 +42,28 @@ def _counts_table(df: pd.DataFrame, cols: list[str], caption: str) -> str:
     counts = runs.astype(str).value_counts(dropna=False).reset_index()
     counts.columns = list(cols) + ["runs"]
     head = "".join(f"<th>{e(c)}</th>" for c in counts.columns)
-    body = "".join("<tr>" + "".join(f"<td>{e(str(v))}</td>" for v in row) + "</tr>" for row in counts.itertuples(index=False))
+    body = "".join(
+        "<tr>" + "".join(f"<td>{e(str(v))}</td>" for v in row) + "</tr>" for row in counts.itertuples(index=False)
+    )
     return (f'<div class="tablewrap"><table class="prov"><caption>{e(caption)}</caption><thead><tr>{head}</tr></thead>'
             f'<tbody>{body}</tbody></table></div>')
 
 
 def _impl_table(df: pd.DataFrame) -> str:
     rows = df[df["metric"].notna() & df["value"].notna()]  # only ids that produced a number
-    rows = rows[rows["source"].astype(object).where(rows["source"].notna(), "") == "metrics"] if "source" in rows else rows
+    rows = (
+        rows[rows["source"].astype(object).where(rows["source"].notna(), "") == "metrics"] if "source" in rows else rows
+    )
     impl: dict[str, set[str]] = {}
     for m, i in zip(rows["metric"], rows["metric_impl"]):
         impl.setdefault(str(m), set()).add("—" if is_null(i) else str(i))
     body = "".join(f"<tr><td>{e(m)}</td><td>{e(', '.join(sorted(v)))}</td></tr>" for m, v in sorted(impl.items()))
-    return ('<div class="tablewrap"><table class="prov"><caption>Metric implementations (metric_impl ids recorded in results.json; '
-            "a metric with several ids was computed by different implementations)</caption>"
-            f"<thead><tr><th>metric</th><th>metric_impl</th></tr></thead><tbody>{body}</tbody></table></div>")
+    return (
+        '<div class="tablewrap"><table class="prov"><caption>'
+        "Metric implementations (metric_impl ids recorded in results.json; "
+        "a metric with several ids was computed by different implementations)</caption>"
+        f"<thead><tr><th>metric</th><th>metric_impl</th></tr></thead><tbody>{body}</tbody></table></div>"
+    )
 
 
 def provenance_html(res: Results, writer_version: str) -> str:
@@ -68,12 +75,20 @@ def provenance_html(res: Results, writer_version: str) -> str:
         "numbers from different evaluation protocols are not comparable and are never averaged together.</p>",
         _counts_table(df, prov, "Prior providers (depth, masks, features) per run"),
         _counts_table(df, ["backend"], "Render backends"),
-        _counts_table(df, ["protocol", "protocols"],
-                      "Evaluation protocols (primary protocol of the run, and every protocol it was evaluated under)"),
+        _counts_table(
+            df,
+            ["protocol", "protocols"],
+            "Evaluation protocols (primary protocol of the run, and every protocol it was evaluated under)",
+        ),
         _impl_table(df),
-        _counts_table(df, mach, "Machines and versions that produced the results (results.json `machine`; env.* from the run's env.json)") if mach
+        _counts_table(
+            df,
+            mach,
+            "Machines and versions that produced the results (results.json `machine`; env.* from the run's env.json)",
+        )
+        if mach
         else "<p>Machine: not recorded in results.json.</p>",
-        f"<p class=\"meta\">Report written by gsbench {e(writer_version)}.</p>",
+        f'<p class="meta">Report written by gsbench {e(writer_version)}.</p>',
     ]
     return "\n".join(parts)
 
@@ -85,10 +100,15 @@ def runs_html(res: Results) -> str:
     head = "<th>study</th>" + "".join(f"<th>{e(c)}</th>" for c in counts.columns)
     body = "".join(f"<tr><td>{e(i)}</td>" + "".join(f"<td class=\"num\">{int(v)}</td>" for v in row) + "</tr>"
                    for i, row in zip(counts.index, counts.values))
-    out = [f'<table class="prov"><caption>Runs by study and status</caption><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>']
+    out = [
+        f'<table class="prov"><caption>Runs by study and status</caption><thead><tr>{head}</tr></thead>'
+        f"<tbody>{body}</tbody></table>"
+    ]
     bad = df[df["status"] != "done"]
     if len(bad):
-        items = "".join(f"<li><code>{e(str(r['run_dir']))}</code>: {e(str(r['status']))}</li>" for _, r in bad.iterrows())
+        items = "".join(
+            f"<li><code>{e(str(r['run_dir']))}</code>: {e(str(r['status']))}</li>" for _, r in bad.iterrows()
+        )
         out.append(f"<p>Runs not finished (their values show as n/a):</p><ul>{items}</ul>")
     if "dropped" in df.columns:
         dropped = [(r["run_dir"], r["dropped"]) for _, r in df.iterrows()
@@ -110,13 +130,18 @@ def write_index(path: Path, title: str, source: str, generated: str, sections: l
 
     body = [f"<h1>{e(title)}</h1>",
             f'<p class="meta">Source: <code>{e(source)}</code> · {len(res.runs)} runs · generated {e(generated)}</p>']
-    body.append("<nav><h2>Contents</h2><ul>" + "".join(f'<li><a href="#{e(s.id)}">{e(s.title)}</a></li>' for s in sections)
-                + '<li><a href="#notes">Notes</a></li><li><a href="#provenance">Provenance</a></li></ul></nav>')
-    body.append('<p class="meta">Tables: best value per compared group in <strong>bold</strong>; '
-                "“n/a (reason)” = could not be computed; “–” = no run; mean ± sample std (n = seeds) when a cell has several "
-                "seeds. Difference tables: row minus the study's reference row [95 % interval] (n); * = the interval "
-                "excludes zero. "
-                "Downloads: " + " · ".join(f'<a href="{e(h)}">{e(t)}</a>' for h, t in links) + "</p>")
+    body.append(
+        "<nav><h2>Contents</h2><ul>"
+        + "".join(f'<li><a href="#{e(s.id)}">{e(s.title)}</a></li>' for s in sections)
+        + '<li><a href="#notes">Notes</a></li><li><a href="#provenance">Provenance</a></li></ul></nav>'
+    )
+    body.append(
+        '<p class="meta">Tables: best value per compared group in <strong>bold</strong>; '
+        "“n/a (reason)” = could not be computed; “–” = no run; mean ± sample std (n = seeds) when a cell has several "
+        "seeds. Difference tables: row minus the study's reference row [95 % interval] (n); * = the interval "
+        "excludes zero. "
+        "Downloads: " + " · ".join(f'<a href="{e(h)}">{e(t)}</a>' for h, t in links) + "</p>"
+    )
     for s in sections:
         body.append(f'<section id="{e(s.id)}"><h2>{e(s.title)}</h2>')
         for t in s.tables:

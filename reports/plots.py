@@ -20,8 +20,15 @@ import numpy as np  # noqa: E402
 
 from gsbench.reports.data import Results, is_null, same  # noqa: E402
 from gsbench.reports.spec import (  # noqa: E402
-    AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE, LOGICAL, NOISE_LABELS, NOISE_ORDER,
-    method_label, metric_spec,
+    AX_LAMBDAS,
+    AX_LATENT,
+    AX_NOISE_SEVERITY,
+    AX_NOISE_TYPE,
+    LOGICAL,
+    NOISE_LABELS,
+    NOISE_ORDER,
+    method_label,
+    metric_spec,
 )
 from gsbench.reports.stats import pearson  # noqa: E402
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, _slug, runs_of, scene_protocols  # noqa: E402
@@ -153,7 +160,15 @@ def plot_time_curves(res: Results, study: Any, run_ids: list[str], path: Path) -
             lab = None if many else run_label(res, rid)
             if rid in curves:
                 xs, ys = curves[rid]
-                ax.plot(xs, ys, "-", color=color[rid], lw=1.4 if not many else 0.8, alpha=0.9 if not many else 0.6, label=lab)
+                ax.plot(
+                    xs,
+                    ys,
+                    "-",
+                    color=color[rid],
+                    lw=1.4 if not many else 0.8,
+                    alpha=0.9 if not many else 0.6,
+                    label=lab,
+                )
                 lab = None
             if rid in finals:
                 ax.plot(*finals[rid], "o", color=color[rid], ms=6, mec="black", mew=0.6, label=lab)
@@ -333,7 +348,9 @@ def plot_noise(res: Results, path_prefix: Path) -> list[Path]:
                 xs = sorted(pts)
                 mu = [float(np.mean(pts[x])) for x in xs]
                 sd = [float(np.std(pts[x], ddof=1)) if len(pts[x]) > 1 else 0.0 for x in xs]
-                ax.errorbar(xs, mu, yerr=sd if any(sd) else None, marker="o", capsize=3, label=NOISE_LABELS.get(kind, str(kind)))
+                ax.errorbar(
+                    xs, mu, yerr=sd if any(sd) else None, marker="o", capsize=3, label=NOISE_LABELS.get(kind, str(kind))
+                )
             if base and not kinds:
                 ax.axhline(float(np.mean(base)), color="gray", ls="--", label="clean")
             arrow = {"higher": " (↑ better)", "lower": " (↓ better)"}.get(sp.better or "", "")
@@ -448,7 +465,13 @@ def plot_table_bars(table: Table, path: Path) -> Path | None:
         arrow = {"higher": " (↑ better)", "lower": " (↓ better)"}.get(first.better or "", "")
         ax.set_title(sp.label + arrow, fontsize=10)
         ax.set_ylabel(sp.label)
-        ax.set_xticks(x, row_names, rotation=30 if len(table.rows) > 3 else 0, ha="right" if len(table.rows) > 3 else "center", fontsize=8)
+        ax.set_xticks(
+            x,
+            row_names,
+            rotation=30 if len(table.rows) > 3 else 0,
+            ha="right" if len(table.rows) > 3 else "center",
+            fontsize=8,
+        )
         ax.grid(True, axis="y", alpha=0.3)
         if nb > 1:
             ax.legend(fontsize=7)

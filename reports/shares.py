@@ -94,7 +94,9 @@ def plot_loss_shares(res: Results, study: Any, run_ids: list[str], path: Path) -
     if not panels:
         return None, notes
     if len(panels) > MAX_PANELS:
-        notes.append(f"Loss shares: {len(panels) - MAX_PANELS} configuration(s) beyond the first {MAX_PANELS} not plotted.")
+        notes.append(
+            f"Loss shares: {len(panels) - MAX_PANELS} configuration(s) beyond the first {MAX_PANELS} not plotted."
+        )
         panels = panels[:MAX_PANELS]
     terms = sorted({t for _, _, _, m in panels for t in m})
     cmap = plt.cm.tab10

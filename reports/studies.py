@@ -13,8 +13,18 @@ from typing import Any
 
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, same
 from gsbench.reports.spec import (
-    AX_FORMULATION, AX_NOISE_TYPE, AX_ORDERING, FORMULATION_LABELS, FORMULATION_ORDER, METHOD_ORDER,
-    NOISE_LABELS, NOISE_ORDER, ORDERING_LABELS, ORDERING_ORDER, PROTOCOL_LABELS, MetricSpec, method_label,
+    AX_FORMULATION,
+    AX_NOISE_TYPE,
+    AX_ORDERING,
+    FORMULATION_LABELS,
+    FORMULATION_ORDER,
+    NOISE_LABELS,
+    NOISE_ORDER,
+    ORDERING_LABELS,
+    ORDERING_ORDER,
+    PROTOCOL_LABELS,
+    MetricSpec,
+    method_label,
     metric_spec,
 )
 from gsbench.reports.table import Cell, Column, Row, Table, _tex
@@ -201,10 +211,12 @@ def removal_table(res: Results) -> list[Table]:
                                "share of object pixels left and PSNR outside the object.")
 
 
-def _method_scene_table(res: Results, ids: list[str], metrics: list[str], tid: str, title: str, caption: str) -> list[Table]:
+def _method_scene_table(
+    res: Results, ids: list[str], metrics: list[str], tid: str, title: str, caption: str
+) -> list[Table]:
     pairs = scene_protocols(res, ids)
     columns = []
-    for sc, pr in pairs:
+    for sc, _pr in pairs:
         for m in metrics:
             sp = _spec_for(m)
             columns.append(Column(m, sp.label, sp.latex, sp.better, group=sc))

@@ -9,10 +9,17 @@ from gsbench.reports.data import Results, is_null, same
 from gsbench.reports.spec import AX_LAMBDAS, AX_LATENT, method_label
 from gsbench.reports.stats import pearson, pearson_interval
 from gsbench.reports.studies import (
-    PROTOCOL_SHORT, _axis_label, _cell, _finish, _get, _slug, _spec_for, runs_of, scene_protocols,
+    PROTOCOL_SHORT,
+    _axis_label,
+    _cell,
+    _finish,
+    _get,
+    _slug,
+    _spec_for,
+    runs_of,
+    scene_protocols,
 )
 from gsbench.reports.table import Cell, Column, Row, Table, _mark, _tex
-
 
 # ---------------------------------------------------------------------------- latent d
 LATENT_ROWS = ["train_s", "peak_rss_mb", "miou", "psnr"]
@@ -46,7 +53,11 @@ def latent_dim_tables(res: Results) -> list[Table]:
         cols.sort(key=lambda t: (t[0] != "gaussiands", float(t[1]) if t[1] is not None else math.inf, str(t[0])))
         columns = []
         for meth, d in cols:
-            lab = (_axis_label(AX_LATENT, d) if d is not None else "default") if meth == "gaussiands" else method_label(meth)
+            lab = (
+                (_axis_label(AX_LATENT, d) if d is not None else "default")
+                if meth == "gaussiands"
+                else method_label(meth)
+            )
             columns.append(Column("d", lab, _tex(lab), None))
         rows, mixed = [], []
         for m in latent_rows(res, sids):
@@ -95,7 +106,7 @@ def lambda_table(res: Results) -> list[Table]:
         return []
     pairs = scene_protocols(res, ids)
     columns = []
-    for sc, pr in pairs:
+    for sc, _pr in pairs:
         for m, lab in (("miou", "r with mIoU"), ("psnr", "r with PSNR")):
             columns.append(Column(m, lab, lab, None, group=sc if len(pairs) > 1 else None))
     rows = []
@@ -113,7 +124,18 @@ def lambda_table(res: Results) -> list[Table]:
                 else:
                     mark = " *" if ci[0] > 0 or ci[1] < 0 else ""
                     cells.append(Cell(text=f"{r:.3f} [{ci[0]:.3f}, {ci[1]:.3f}]{mark} (n={len(xs)})"))
-        rows.append(Row(["λ_" + a.rsplit(".", 1)[-1], ", ".join(_axis_label(a, v) for v in sorted(res.distinct(a, ids), key=lambda v: float(v) if not is_null(v) else -1))], cells))
+        rows.append(
+            Row(
+                [
+                    "λ_" + a.rsplit(".", 1)[-1],
+                    ", ".join(
+                        _axis_label(a, v)
+                        for v in sorted(res.distinct(a, ids), key=lambda v: float(v) if not is_null(v) else -1)
+                    ),
+                ],
+                cells,
+            )
+        )
     cap = ("Pearson correlation of each lambda (raw value, one point per run, all other lambdas varying) "
            "with the final mIoU and PSNR of the lambda grid: r [95 % interval by Fisher's z] (runs); "
            "* = the interval excludes zero.")

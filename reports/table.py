@@ -106,7 +106,7 @@ class Table:
         for j, col in enumerate(self.columns):
             by_metric.setdefault(col.metric, []).append(j)
         for r in self.rows:
-            for metric, js in by_metric.items():
+            for js in by_metric.values():
                 _mark([r.cells[j] for j in js], self.columns[js[0]].better)
 
     # ---------------------------------------------------------------- renderers
@@ -134,7 +134,11 @@ class Table:
             if r.section != current and r.section is not None:
                 lines.append("| " + " | ".join([f"*{_md_escape(r.section)}*"] + [""] * (len(heads) - 1)) + " |")
             current = r.section
-            labels = [(CHECK if v else "") for v in r.label_checks] if r.label_checks is not None else [_md_escape(x) for x in r.labels]
+            labels = (
+                [(CHECK if v else "") for v in r.label_checks]
+                if r.label_checks is not None
+                else [_md_escape(x) for x in r.labels]
+            )
             cells = []
             for c in r.cells:
                 s = _md_escape(c.plain())
@@ -149,7 +153,7 @@ class Table:
         nl = len(self.label_headers)
         spans = self._group_spans()
         colspec = "c" * nl if self.label_is_check else "l" * nl
-        for g, k, _ in spans:
+        for _g, k, _ in spans:
             colspec += "|" + "c" * k
         ncols = nl + len(self.columns)
         out = ["\\begin{table}[ht]", "\\centering",
@@ -171,7 +175,11 @@ class Table:
             if r.section != current and r.section is not None:
                 out.append(f"\\multicolumn{{{ncols}}}{{l}}{{\\textit{{{_tex(r.section)}}}}} \\\\")
             current = r.section
-            labels = [("\\checkmark" if v else "") for v in r.label_checks] if r.label_checks is not None else [_tex(x) for x in r.labels]
+            labels = (
+                [("\\checkmark" if v else "") for v in r.label_checks]
+                if r.label_checks is not None
+                else [_tex(x) for x in r.labels]
+            )
             cells = []
             for c in r.cells:
                 if c.check is not None:
@@ -199,7 +207,9 @@ class Table:
         current = object()
         for r in self.rows:
             if r.section != current and r.section is not None:
-                out.append(f'<tr class="section"><td colspan="{nl + len(self.columns)}"><em>{e(r.section)}</em></td></tr>')
+                out.append(
+                    f'<tr class="section"><td colspan="{nl + len(self.columns)}"><em>{e(r.section)}</em></td></tr>'
+                )
             current = r.section
             labels = [(CHECK if v else "") for v in r.label_checks] if r.label_checks is not None else list(r.labels)
             tds = "".join(f'<td class="label">{e(x)}</td>' for x in labels)

@@ -9,7 +9,9 @@ from gsbench.errors import InputError
 
 
 def test_help_lists_subcommands():
-    out = subprocess.run([sys.executable, "-m", "gsbench.cli", "--help"], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        [sys.executable, "-m", "gsbench.cli", "--help"], capture_output=True, text=True, check=True
+    ).stdout
     for cmd in ["make-scene", "train", "eval", "ablate", "report", "stress"]:
         assert cmd in out
 
@@ -73,5 +75,7 @@ def test_a_real_bad_input_exits_1_without_traceback(tmp_path):
     p = subprocess.run([sys.executable, "-m", "gsbench.cli", "collect", str(tmp_path)], capture_output=True, text=True)
     assert p.returncode == 1, p.stderr
     assert "Traceback" not in p.stderr and "results.json" in p.stderr and "corrupt or truncated JSON" in p.stderr
-    p = subprocess.run([sys.executable, "-m", "gsbench.cli", "--debug", "collect", str(tmp_path)], capture_output=True, text=True)
+    p = subprocess.run(
+        [sys.executable, "-m", "gsbench.cli", "--debug", "collect", str(tmp_path)], capture_output=True, text=True
+    )
     assert p.returncode == 1 and "Traceback" in p.stderr and "InputError" in p.stderr

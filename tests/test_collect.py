@@ -11,7 +11,11 @@ import pytest
 
 from gsbench.cli import main
 from gsbench.collect import (
-    BASE_COLUMNS, collect, missing_reason, read_collected, write_collected,
+    BASE_COLUMNS,
+    collect,
+    missing_reason,
+    read_collected,
+    write_collected,
 )
 from gsbench.errors import InputError
 from tests.test_report_synthetic import make_ablations, make_main, write_run

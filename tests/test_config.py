@@ -26,8 +26,17 @@ def test_preset_then_overrides():
     assert parse_overrides({"a": {"b": 1}}) == {"a.b": 1} == parse_overrides(["a.b=1"])
 
 
-@pytest.mark.parametrize("bad", [["train.iteration=5"], ["nokey=1"], ["train.iterations"], ["gaussiands.depth_formulation=foo"],
-                                 ["gaussiands.latent_dim=0"], ["query.mode=both"]])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        ["train.iteration=5"],
+        ["nokey=1"],
+        ["train.iterations"],
+        ["gaussiands.depth_formulation=foo"],
+        ["gaussiands.latent_dim=0"],
+        ["query.mode=both"],
+    ],
+)
 def test_bad_overrides_are_input_errors(bad):
     with pytest.raises(InputError):
         load_config("gaussiands", None, bad)
@@ -94,7 +103,9 @@ def test_resolver_vanilla_twostage_and_formulation_none():
     cfg, dropped = resolve_for_scene(load_config("gaussiands", None, ["gaussiands.depth_formulation=none"]), _scene())
     assert cfg["gaussiands"]["losses"]["depth"] is False and cfg["gaussiands"]["losses"]["ds"] is True
     assert "formulation=none" in dropped["gaussiands.losses.depth"]
-    cfg, dropped = resolve_for_scene(load_config("gaussiands", None, ["gaussiands.losses.depth=false", "gaussiands.losses.ds=false"]), _scene())
+    cfg, dropped = resolve_for_scene(
+        load_config("gaussiands", None, ["gaussiands.losses.depth=false", "gaussiands.losses.ds=false"]), _scene()
+    )
     assert "nothing uses it" in dropped["priors.depth"]
 
 
@@ -191,9 +202,19 @@ def test_out_of_range_and_wrong_type_name_key_and_range(item, expect):
 
 
 def test_values_inside_the_ranges_are_kept():
-    c = load_config("gaussiands", None, ["train.lambda_dssim=0", "train.lambda_dssim=1", "train.iterations=3e4",
-                                         "gaussiands.lambdas.sem=0", "train.max_width=null", "priors.depth.noise.type=null",
-                                         "gaussiands.lambdas.tv=2"])
+    c = load_config(
+        "gaussiands",
+        None,
+        [
+            "train.lambda_dssim=0",
+            "train.lambda_dssim=1",
+            "train.iterations=3e4",
+            "gaussiands.lambdas.sem=0",
+            "train.max_width=null",
+            "priors.depth.noise.type=null",
+            "gaussiands.lambdas.tv=2",
+        ],
+    )
     assert c["train"]["lambda_dssim"] == 1.0 and c["gaussiands"]["lambdas"]["sem"] == 0.0
     assert c["train"]["iterations"] == 30000 and isinstance(c["train"]["iterations"], int)
     assert c["gaussiands"]["lambdas"]["tv"] == 2.0 and isinstance(c["gaussiands"]["lambdas"]["tv"], float)
@@ -259,16 +280,16 @@ def test_every_rule_names_a_key_of_default_yaml_and_shipped_configs_pass():
 
 def test_declared_choices_agree_with_the_code_that_consumes_them():
     from gsbench.datasets.noise import NOISE_KINDS, SEVERITIES
+    from gsbench.datasets.splits import HOLDOUT_CHOICES
+    from gsbench.evaluation.frames import RESOLUTIONS
     from gsbench.evaluation.segmentation import PROTOCOLS
     from gsbench.methods.losses import DEPTH_FORMULATIONS
+    from gsbench.metrics.lerf import LERF_KERNEL_MODES
+    from gsbench.metrics.perceptual import LPIPS_RANGES
     from gsbench.priors.depth import DEPTH_PROVIDERS
     from gsbench.priors.features import FEATURE_PROVIDERS
     from gsbench.priors.ordering import ORDERINGS
     from gsbench.priors.pipeline import MASK_PROVIDERS, PROPAGATORS
-    from gsbench.datasets.splits import HOLDOUT_CHOICES
-    from gsbench.evaluation.frames import RESOLUTIONS
-    from gsbench.metrics.lerf import LERF_KERNEL_MODES
-    from gsbench.metrics.perceptual import LPIPS_RANGES
     from gsbench.render import BACKENDS
     assert set(config_keys.HOLDOUTS) == set(HOLDOUT_CHOICES)
     assert set(config_keys.EVAL_RESOLUTIONS) == set(RESOLUTIONS)

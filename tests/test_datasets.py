@@ -20,8 +20,12 @@ from gsbench.scene import Camera
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 KAOLIN = SHARED / "kaolin_clock"
 LERF_FILE = SHARED / "lerf_ovs_labels" / "waldo_kitchen" / "frame_00066.json"
-need_kaolin = pytest.mark.skipif(not KAOLIN.is_dir(), reason=f"real test data absent: {KAOLIN} (../shared/data not beside the repo)")
-need_lerf = pytest.mark.skipif(not LERF_FILE.is_file(), reason=f"real test data absent: {LERF_FILE} (../shared/data not beside the repo)")
+need_kaolin = pytest.mark.skipif(
+    not KAOLIN.is_dir(), reason=f"real test data absent: {KAOLIN} (../shared/data not beside the repo)"
+)
+need_lerf = pytest.mark.skipif(
+    not LERF_FILE.is_file(), reason=f"real test data absent: {LERF_FILE} (../shared/data not beside the repo)"
+)
 
 
 def _images(folder: Path, n: int, w: int = 16, h: int = 12) -> list[str]:
@@ -91,7 +95,11 @@ def test_transforms_json_opengl_to_opencv(tmp_path):
     """Identity OpenGL c2w: camera at the origin looking down -z with +y up."""
     _images(tmp_path, 1, 40, 30)
     angle = 2 * math.atan(20 / 50)  # fx = 0.5 W / tan(angle / 2) = 50
-    tj = {"camera_angle_x": angle, "k1": 0.1, "frames": [{"file_path": "./img_000", "transform_matrix": np.eye(4).tolist()}]}
+    tj = {
+        "camera_angle_x": angle,
+        "k1": 0.1,
+        "frames": [{"file_path": "./img_000", "transform_matrix": np.eye(4).tolist()}],
+    }
     (tmp_path / "transforms.json").write_text(json.dumps(tj))
     s = load_scene(tmp_path)
     assert s.layout == "nerf"
@@ -154,7 +162,9 @@ def test_image_size_mismatch_names_the_file(tmp_path):
 
 
 def test_pose_count_mismatch_names_the_file(tmp_path):
-    cams = [Camera(np.array([[30.0, 0, 8], [0, 30.0, 6], [0, 0, 1]]), c.world_to_camera, 16, 12) for c in _random_cameras(3)]
+    cams = [
+        Camera(np.array([[30.0, 0, 8], [0, 30.0, 6], [0, 0, 1]]), c.world_to_camera, 16, 12) for c in _random_cameras(3)
+    ]
     _images(tmp_path / "images", 4)
     write_poses_bounds(tmp_path / "poses_bounds.npy", cams, np.tile([0.5, 9.0], (3, 1)))
     with pytest.raises(InputError, match="poses_bounds.npy: 3 poses but 4 images"):
@@ -162,7 +172,9 @@ def test_pose_count_mismatch_names_the_file(tmp_path):
 
 
 def _ovs_scene(root: Path) -> None:
-    cams = [Camera(np.array([[30.0, 0, 8], [0, 30.0, 6], [0, 0, 1]]), c.world_to_camera, 16, 12) for c in _random_cameras(3)]
+    cams = [
+        Camera(np.array([[30.0, 0, 8], [0, 30.0, 6], [0, 0, 1]]), c.world_to_camera, 16, 12) for c in _random_cameras(3)
+    ]
     _images(root / "images", 3)
     write_poses_bounds(root / "poses_bounds.npy", cams, np.tile([0.5, 9.0], (3, 1)))
     seg = root / "segmentations"
@@ -255,8 +267,12 @@ def test_real_lerf_label_areas():
 def test_real_lerf_frame_index_and_rescale(tmp_path):
     """frame_00066 is index 65; labels drawn at 985x725 are rescaled to 197x145 images."""
     n = 70
-    cams = [Camera(np.array([[100.0, 0, 98.5], [0, 100.0, 72.5], [0, 0, 1]]), c.world_to_camera, 197, 145, f"img_{i:03d}.png")
-            for i, c in enumerate(_random_cameras(n))]
+    cams = [
+        Camera(
+            np.array([[100.0, 0, 98.5], [0, 100.0, 72.5], [0, 0, 1]]), c.world_to_camera, 197, 145, f"img_{i:03d}.png"
+        )
+        for i, c in enumerate(_random_cameras(n))
+    ]
     _images(tmp_path / "images", n, 197, 145)
     write_colmap(tmp_path / "sparse" / "0", cams, [c.name for c in cams])
     (tmp_path / "label" / tmp_path.name).mkdir(parents=True)

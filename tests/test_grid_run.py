@@ -19,6 +19,7 @@ from gsbench import grids
 from gsbench.grids.executors import SerialExecutor
 from gsbench.store import read_json, write_json_atomic
 
+
 @pytest.fixture
 def own_tmp():
     """A temp folder outside pytest's basetemp: concurrent pytest sessions on a shared machine rotate
@@ -64,8 +65,10 @@ def test_skip_failed_retry_and_stale(tmp_path, monkeypatch):
     assert sorted(rep.dispatched) == sorted(ids) and sorted(calls) == sorted(ids)
     st = read_json(out / ids[1] / grids.CELL_STATUS_FILE)
     assert st["state"] == "failed" and "simulated failure" in st["error"] and "Traceback" in st["traceback"]
-    failed_res = read_json(out / ids[1] / "results.json")     # a failure record for the reports
-    assert failed_res["status"] == "failed" and any("simulated failure" in why for why in failed_res["skipped"].values())
+    failed_res = read_json(out / ids[1] / "results.json")  # a failure record for the reports
+    assert failed_res["status"] == "failed" and any(
+        "simulated failure" in why for why in failed_res["skipped"].values()
+    )
 
     # re-run: finished cells and the failed one are left alone
     calls.clear()

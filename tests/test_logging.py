@@ -50,6 +50,7 @@ def test_importing_gsbench_flushed_denormals():
 @pytest.mark.parametrize("backend", ["torch", "cpu"])
 def test_render_does_not_touch_process_state(backend, monkeypatch):
     import numpy as np
+
     from gsbench.gaussians import GaussianField
     from gsbench.render import render
     from gsbench.scene import Camera

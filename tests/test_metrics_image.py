@@ -82,8 +82,11 @@ def test_ssim_matches_skimage_random(shape):
 
 def test_ssim_matches_skimage_natural_like():
     a = _natural_like(120, 160, 1)
-    for b in (cv2.GaussianBlur(a, (5, 5), 1.2), np.clip(a + 0.05 * np.random.default_rng(2).standard_normal(a.shape), 0, 1),
-              np.roll(a, 2, axis=1)):
+    for b in (
+        cv2.GaussianBlur(a, (5, 5), 1.2),
+        np.clip(a + 0.05 * np.random.default_rng(2).standard_normal(a.shape), 0, 1),
+        np.roll(a, 2, axis=1),
+    ):
         assert abs(ssim(a, b) - _skimage(a, b)) <= SSIM_TOL
 
 

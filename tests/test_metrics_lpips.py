@@ -83,7 +83,9 @@ def _write_weights(folder, net, seed=0):
 def _reference(net, sd, lin, a, b):
     """LPIPS written functionally from the published definition, independent of the module."""
     def feats(x):
-        x = (x - torch.tensor([-.030, -.088, -.188]).view(1, 3, 1, 1)) / torch.tensor([.458, .448, .450]).view(1, 3, 1, 1)
+        x = (x - torch.tensor([-0.030, -0.088, -0.188]).view(1, 3, 1, 1)) / torch.tensor([0.458, 0.448, 0.450]).view(
+            1, 3, 1, 1
+        )
         out = []
         if net == "vgg":
             blocks = [[0, 2], [5, 7], [10, 12, 14], [17, 19, 21], [24, 26, 28]]

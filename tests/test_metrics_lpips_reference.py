@@ -28,7 +28,9 @@ def test_matches_official_lpips(net, tmp_path):
     shutil.copy(lin_src, tmp_path / "lpips" / "v0.1" / f"{net}.pth")
 
     ref = ref_pkg.LPIPS(net=net, pretrained=True, pnet_rand=True, verbose=False).eval()
-    bounds = [(0, 4), (4, 9), (9, 16), (16, 23), (23, 30)] if net == "vgg" else [(0, 2), (2, 5), (5, 8), (8, 10), (10, 12)]
+    bounds = (
+        [(0, 4), (4, 9), (9, 16), (16, 23), (23, 30)] if net == "vgg" else [(0, 2), (2, 5), (5, 8), (8, 10), (10, 12)]
+    )
     ref.net.load_state_dict({f"slice{s}.{k}": v for s, (lo, hi) in enumerate(bounds, 1)
                              for k, v in tv.features.state_dict().items() if lo <= int(k.split(".")[0]) < hi})
     rng = np.random.default_rng(0)

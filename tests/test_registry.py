@@ -66,7 +66,13 @@ def test_a_registered_method_is_a_cli_choice_and_validates(dummy, tiny_scene):
     assert not any(res["gaussiands"]["losses"].values())
     assert registry.priors_request(cfg, tiny_scene) is None
     from gsbench.reports.studies import ordered_methods
-    assert ordered_methods(["dummy-test", "gaussiands", "zzz", "vanilla"]) == ["vanilla", "gaussiands", "dummy-test", "zzz"]
+
+    assert ordered_methods(["dummy-test", "gaussiands", "zzz", "vanilla"]) == [
+        "vanilla",
+        "gaussiands",
+        "dummy-test",
+        "zzz",
+    ]
 
 
 def test_an_unregistered_method_is_refused(dummy):
@@ -163,9 +169,19 @@ def test_the_grid_entry_is_a_cache_hit_for_fit(tiny_scene, tmp_path):
     cfg = load_config("gaussiands", "cpu-small", ["train.max_width=16", f"priors.cache_dir={tmp_path / 'cache'}"])
     req = registry.priors_request(cfg, tiny_scene.path)
     assert req is not None and req["need_depth"] and req["need_sem"]
-    first = prepare_priors(tiny_scene, req["priors"], req["view_ids"], tuple(req["size"]), Path(req["priors"]["cache_dir"]),
-                           need_depth=req["need_depth"], need_masks=req["need_sem"], need_features=req["need_sem"],
-                           per_frame_masks=req["per_frame"], seed=req["seed"], progress=False)
+    first = prepare_priors(
+        tiny_scene,
+        req["priors"],
+        req["view_ids"],
+        tuple(req["size"]),
+        Path(req["priors"]["cache_dir"]),
+        need_depth=req["need_depth"],
+        need_masks=req["need_sem"],
+        need_features=req["need_sem"],
+        per_frame_masks=req["per_frame"],
+        seed=req["seed"],
+        progress=False,
+    )
     assert not any(v["hit"] for v in first.cache.values())
     resolved, _ = resolve_for_scene(cfg, tiny_scene)
     again = fit_priors(tiny_scene, resolved, tmp_path / "run", progress=False)

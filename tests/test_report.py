@@ -13,14 +13,19 @@ from PIL import Image
 
 from gsbench.cli import main
 from gsbench.collect import collect, read_collected, write_collected
+from gsbench.reports.build import build_tables
 from gsbench.reports.data import Results
 from gsbench.reports.plots import pareto_front, train_curve
-from gsbench.reports.build import build_tables
 from gsbench.reports.stats import pearson
 from gsbench.reports.studies import reconstruction_table
 from gsbench.reports.table import Cell, Column, Row, Table
 from tests.test_report_synthetic import (
-    LAMBDA_DEPTH, LAMBDA_SEM, lambda_miou, make_all, make_main, write_run,
+    LAMBDA_DEPTH,
+    LAMBDA_SEM,
+    lambda_miou,
+    make_all,
+    make_main,
+    write_run,
 )
 
 
@@ -71,7 +76,15 @@ def test_semantic_tables(report: Path):
     rows = md_rows(report, "3dovs_miou_mbiou")
     g = row_of(rows, "GaussianDS")
     # bench (0.90, 0.94) -> 92.00 +- 2.83; sofa 98.00; overall mIoU (92 + 98) / 2 = 95.00
-    assert g == ["GaussianDS", "**92.00 ± 2.83 (n=2)**", "**82.00 ± 2.83 (n=2)**", "**98.00**", "**86.00**", "**95.00**", "**84.00**"]
+    assert g == [
+        "GaussianDS",
+        "**92.00 ± 2.83 (n=2)**",
+        "**82.00 ± 2.83 (n=2)**",
+        "**98.00**",
+        "**86.00**",
+        "**95.00**",
+        "**84.00**",
+    ]
     t = row_of(rows, "Two-stage")
     assert t[1:] == ["85.00", "70.00", "80.00", "75.00", "82.50", "72.50"]
     v = row_of(rows, "3DGS (vanilla)")
@@ -107,7 +120,9 @@ def test_ablation_tables(report: Path):
                      ["Pose-nearest", "**1.500**", "**53.21**"]]
 
     lat = md_rows(report, "latent_dim_waldo_kitchen")
-    head = [ln for ln in (report / "tables" / "latent_dim_waldo_kitchen.md").read_text().splitlines() if ln.startswith("|")][0]
+    head = [
+        ln for ln in (report / "tables" / "latent_dim_waldo_kitchen.md").read_text().splitlines() if ln.startswith("|")
+    ][0]
     assert [c.strip() for c in head.split("|")[1:-1]] == ["Latent dimension d", "3", "8", "16", "3DGS (vanilla)"]
     assert row_of(lat, "Training time (min)")[1:] == ["2.00", "4.00", "8.00", "**1.00**"]
     assert row_of(lat, "Peak RSS memory (MB)")[1:] == ["500", "600", "800", "**300**"]
@@ -303,7 +318,9 @@ def test_lambda_slice_keeps_one_sweep(tmp_path: Path):
 
 def test_long_reason_is_shortened_in_cells(tmp_path: Path):
     long = "no LPIPS weights: backbone vgg16.pth not found (set GSBENCH_WEIGHTS)"
-    write_run(tmp_path, "a", method="vanilla", scene="s", metrics={"psnr": 20.0, "lpips": None}, skipped={"lpips": long})
+    write_run(
+        tmp_path, "a", method="vanilla", scene="s", metrics={"psnr": 20.0, "lpips": None}, skipped={"lpips": long}
+    )
     res = Results(collect(tmp_path))
     (t,) = reconstruction_table(res)
     lp = next(j for j, c in enumerate(t.columns) if c.metric == "lpips")

@@ -10,7 +10,14 @@ import pandas as pd
 from gsbench.collect import collect, config_key
 from gsbench.reports.ablations import loss_subsets_table, parse_dropped
 from gsbench.reports.claims import (
-    INCONCLUSIVE, NOT_RUN, NOT_TESTABLE, OPPOSITE, PAPER_CLAIMS, REPRODUCED, claims_table, verdict,
+    INCONCLUSIVE,
+    NOT_RUN,
+    NOT_TESTABLE,
+    OPPOSITE,
+    PAPER_CLAIMS,
+    REPRODUCED,
+    claims_table,
+    verdict,
 )
 from gsbench.reports.data import Results
 from tests.test_report_synthetic import write_run
@@ -138,10 +145,19 @@ def _loss_runs(root: Path) -> pd.DataFrame:
     for dep in (False, True):
         for s in (0, 1):
             name = f"ls/d{int(dep)}_{s}"
-            write_run(root, name, method="gaussiands", scene="bench", seed=s, study="loss_subsets",
-                      grid={"gaussiands.losses.depth": dep, "gaussiands.losses.tv": False, "gaussiands.losses.ds": False},
-                      metrics={"psnr": 20.0 + s, "miou_3dovs": 0.5})
-            dropped[str(root / name)] = "gaussiands.losses.depth: no depth prior; priors.depth: no depth prior" if dep else ""
+            write_run(
+                root,
+                name,
+                method="gaussiands",
+                scene="bench",
+                seed=s,
+                study="loss_subsets",
+                grid={"gaussiands.losses.depth": dep, "gaussiands.losses.tv": False, "gaussiands.losses.ds": False},
+                metrics={"psnr": 20.0 + s, "miou_3dovs": 0.5},
+            )
+            dropped[str(root / name)] = (
+                "gaussiands.losses.depth: no depth prior; priors.depth: no depth prior" if dep else ""
+            )
     df = collect(root)
     df["dropped"] = df["run_dir"].map(dropped)  # the column collect will carry
     return df

@@ -17,7 +17,9 @@ CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 @pytest.mark.chromium
-@pytest.mark.skipif(CHROMIUM is None, reason="headless Chromium not installed (Debian package `chromium`; .ci/run installs it)")
+@pytest.mark.skipif(
+    CHROMIUM is None, reason="headless Chromium not installed (Debian package `chromium`; .ci/run installs it)"
+)
 def test_index_html_renders_in_headless_chromium(tmp_path: Path):
     make_main(tmp_path / "runs")
     summary = build_report(tmp_path / "runs", tmp_path / "report")

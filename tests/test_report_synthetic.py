@@ -9,7 +9,14 @@ import json
 from pathlib import Path
 from typing import Any
 
-MACHINE = {"host": "testhost", "cpu": "Test CPU", "cores": 2, "torch": "2.13.0", "gsbench": "0.1.0", "git_sha": "abc1234"}
+MACHINE = {
+    "host": "testhost",
+    "cpu": "Test CPU",
+    "cores": 2,
+    "torch": "2.13.0",
+    "gsbench": "0.1.0",
+    "git_sha": "abc1234",
+}
 IMPL = {"psnr": "gsbench.psnr.uint8.v1", "ssim": "gsbench.ssim.gauss11.zero-pad.v1", "lpips": "lpips.vgg.v0.1",
         "fps": "gsbench.fps.median.v1", "miou_3dovs": "gsbench.3dovs.argmax.v1", "mbiou_3dovs": "gsbench.biou.v1",
         "miou_lerf": "gsbench.lerf.langsplat.v1"}
@@ -56,13 +63,27 @@ def make_main(root: Path) -> None:
               skipped={**NO_LPIPS, "miou_3dovs": NO_SEM}, curve=c,
               timings={"train_s": 60.0})
     for seed, (p, s, f, mi, mb) in enumerate([(24.0, 0.70, 90.0, 0.90, 0.80), (26.0, 0.72, 110.0, 0.94, 0.84)]):
-        write_run(root, f"main/gds_bench_s{seed}", method="gaussiands", scene="bench", seed=seed,
-                  metrics={"psnr": p, "ssim": s, "lpips": None, "fps": f, "miou_3dovs": mi, "mbiou_3dovs": mb},
-                  skipped=NO_LPIPS, curve=[(10.0, {"psnr": 16.0, "miou_3dovs": 0.6}), (90.0, {"psnr": p, "miou_3dovs": mi})],
-                  timings={"train_s": 100.0 + 20 * seed})
-    write_run(root, "main/twostage_bench", method="twostage", scene="bench",
-              metrics={"psnr": 22.0, "ssim": 0.65, "lpips": None, "fps": 120.0, "miou_3dovs": 0.85, "mbiou_3dovs": 0.70},
-              skipped=NO_LPIPS, curve=c, timings={"train_s": 150.0})
+        write_run(
+            root,
+            f"main/gds_bench_s{seed}",
+            method="gaussiands",
+            scene="bench",
+            seed=seed,
+            metrics={"psnr": p, "ssim": s, "lpips": None, "fps": f, "miou_3dovs": mi, "mbiou_3dovs": mb},
+            skipped=NO_LPIPS,
+            curve=[(10.0, {"psnr": 16.0, "miou_3dovs": 0.6}), (90.0, {"psnr": p, "miou_3dovs": mi})],
+            timings={"train_s": 100.0 + 20 * seed},
+        )
+    write_run(
+        root,
+        "main/twostage_bench",
+        method="twostage",
+        scene="bench",
+        metrics={"psnr": 22.0, "ssim": 0.65, "lpips": None, "fps": 120.0, "miou_3dovs": 0.85, "mbiou_3dovs": 0.70},
+        skipped=NO_LPIPS,
+        curve=c,
+        timings={"train_s": 150.0},
+    )
     write_run(root, "main/gds_sofa", method="gaussiands", scene="sofa",
               metrics={"psnr": 26.0, "ssim": 0.80, "lpips": None, "fps": 95.0, "miou_3dovs": 0.98, "mbiou_3dovs": 0.86},
               skipped=NO_LPIPS)
@@ -83,16 +104,22 @@ def loss_value(depth: bool, tv: bool, ds: bool) -> tuple[float, float]:
 def make_ablations(root: Path) -> None:
     for d, t, s in itertools.product([False, True], repeat=3):
         p, mi = loss_value(d, t, s)
-        write_run(root, f"loss/{int(d)}{int(t)}{int(s)}", method="gaussiands", scene="bench", study="loss_subsets",
-                  grid={"gaussiands.losses.depth": d, "gaussiands.losses.tv": t, "gaussiands.losses.ds": s},
-                  metrics={"psnr": p, "miou_3dovs": mi},
-                  curve=[(5.0, {"psnr": p - 3, "miou_3dovs": mi - 0.2}), (20.0 + 10 * d, {"psnr": p, "miou_3dovs": mi})])
+        write_run(
+            root,
+            f"loss/{int(d)}{int(t)}{int(s)}",
+            method="gaussiands",
+            scene="bench",
+            study="loss_subsets",
+            grid={"gaussiands.losses.depth": d, "gaussiands.losses.tv": t, "gaussiands.losses.ds": s},
+            metrics={"psnr": p, "miou_3dovs": mi},
+            curve=[(5.0, {"psnr": p - 3, "miou_3dovs": mi - 0.2}), (20.0 + 10 * d, {"psnr": p, "miou_3dovs": mi})],
+        )
     forms = {"none": (20.0, 0.300), "raw_l1": (21.31, 0.246), "minmax": (23.93, 0.184),
              "scale_shift": (24.81, 0.184), "pearson": (24.0, 0.190)}
-    for f, (p, l) in forms.items():
+    for f, (p, lp) in forms.items():
         write_run(root, f"form/{f}", method="gaussiands", scene="bench", study="depth_formulation",
                   grid={"gaussiands.depth_formulation": f},
-                  metrics={"psnr": p, "lpips": l, "ssim": 0.7, "miou_3dovs": 0.9, "mbiou_3dovs": 0.8})
+                  metrics={"psnr": p, "lpips": lp, "ssim": 0.7, "miou_3dovs": 0.9, "mbiou_3dovs": 0.8})
     for o, (dist, iou) in {"random": (5.0, 0.3392), "filename": (2.03, 0.5085), "pose": (1.5, 0.5321)}.items():
         write_run(root, f"ord/{o}", method="gaussiands", scene="bench", study="ordering", grid={"priors.ordering": o},
                   metrics={"ordering_adjacent_distance": dist, "ordering_adjacent_mask_iou_strict": iou, "psnr": 24.0})
@@ -125,9 +152,19 @@ def make_lambda_noise(root: Path) -> None:
               metrics={"psnr": 25.0, "ssim": 0.8, "miou_3dovs": 0.95})
     for kind, drop in {"gaussian": 0.2, "motion_blur": 1.0}.items():
         for sev in (1, 3):
-            write_run(root, f"noise/{kind}_{sev}", method="gaussiands", scene="bench", study="depth_noise",
-                      grid={"priors.depth.noise.type": kind, "priors.depth.noise.severity": sev},
-                      metrics={"psnr": 25.0 - drop * sev, "ssim": 0.8 - 0.01 * drop * sev, "miou_3dovs": 0.95 - 0.02 * drop * sev})
+            write_run(
+                root,
+                f"noise/{kind}_{sev}",
+                method="gaussiands",
+                scene="bench",
+                study="depth_noise",
+                grid={"priors.depth.noise.type": kind, "priors.depth.noise.severity": sev},
+                metrics={
+                    "psnr": 25.0 - drop * sev,
+                    "ssim": 0.8 - 0.01 * drop * sev,
+                    "miou_3dovs": 0.95 - 0.02 * drop * sev,
+                },
+            )
     write_run(root, "noise/salt_pepper_5", method="gaussiands", scene="bench", study="depth_noise",
               grid={"priors.depth.noise.type": "salt_pepper", "priors.depth.noise.severity": 5},
               metrics={"psnr": None, "ssim": None, "miou_3dovs": None}, status="failed")

@@ -70,7 +70,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--grid is required (a shipped name or a YAML file; --list shows the shipped ones)")
     if args.dry_run:
         for c in grid.cells():
-            print(f"{c.method:10s} {c.scene.label:24s} seed={c.seed} " + " ".join(f"{k}={v}" for k, v in c.axes.items()))
+            print(
+                f"{c.method:10s} {c.scene.label:24s} seed={c.seed} " + " ".join(f"{k}={v}" for k, v in c.axes.items())
+            )
         print(f"{len(grid.cells())} cells")
         return 0
     from gsbench.grids.executors import make_executor

@@ -8,7 +8,9 @@ from pathlib import Path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("runs_dir", type=Path, help="folder searched recursively for results.json (hidden folders skipped)")
+    parser.add_argument(
+        "runs_dir", type=Path, help="folder searched recursively for results.json (hidden folders skipped)"
+    )
     parser.add_argument("--out", type=Path, default=None,
                         help="folder to write collected.parquet / collected.csv into (default: RUNS_DIR)")
 
@@ -21,7 +23,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"gsbench collect: warning: {w}", file=sys.stderr)
     out = write_collected(df, args.out or args.runs_dir)
     n_runs = df["run_id"].nunique()
-    studies = sorted({("standalone" if (s is None or s != s) else str(s)) for s in df.drop_duplicates("run_id")["study"]})
+    studies = sorted(
+        {("standalone" if (s is None or s != s) else str(s)) for s in df.drop_duplicates("run_id")["study"]}
+    )
     fmt = "Parquet" if out.suffix == ".parquet" else "CSV (pyarrow not installed)"
     print(f"collected {n_runs} runs, {len(df)} rows (studies: {', '.join(studies)}) -> {out} [{fmt}]")
     runs = df.drop_duplicates("run_id")

@@ -12,8 +12,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="output folder (must not exist or be empty)")
     parser.add_argument("--seed", type=int, default=0, help="layout / camera seed (default 0)")
     parser.add_argument("--views", type=int, default=None, help="number of views (default: the preset's)")
-    parser.add_argument("--resolution", default=None, metavar="WxH", help="image size, e.g. 128x96 (default: the preset's)")
-    parser.add_argument("--layout", default="both", choices=LAYOUT_CHOICES, help="label layouts to write (default both)")
+    parser.add_argument(
+        "--resolution", default=None, metavar="WxH", help="image size, e.g. 128x96 (default: the preset's)"
+    )
+    parser.add_argument(
+        "--layout", default="both", choices=LAYOUT_CHOICES, help="label layouts to write (default both)"
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 

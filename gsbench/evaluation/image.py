@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from gsbench.errors import InputError
+
 from .block import Block, to_numpy
 from .frames import size_text, view_name
 

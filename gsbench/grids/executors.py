@@ -17,9 +17,9 @@ from __future__ import annotations
 import functools
 import os
 import sys
-from multiprocessing import util as mp_util
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
+from multiprocessing import util as mp_util
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 

@@ -165,7 +165,9 @@ def _parse_scene(item: Any, where: str) -> SceneSpec:
     else:
         raise InputError(f"{where}: a scene is a preset name, a folder path or a mapping, got {item!r}")
     if spec.preset and known_presets is not None and spec.preset not in known_presets:
-        raise InputError(f"{where}: unknown synthetic preset {spec.preset!r}; known: {', '.join(sorted(known_presets))}")
+        raise InputError(
+            f"{where}: unknown synthetic preset {spec.preset!r}; known: {', '.join(sorted(known_presets))}"
+        )
     return spec
 
 
@@ -250,7 +252,9 @@ def parse_grid(raw: dict, where: str = "<grid>", path: Optional[Path] = None,
                 for k, v in parse_overrides(base.get("set"), f"{where}: base.set").items()}
     extra_set = {k: check_value(k, v, leaves, "--set") for k, v in (extra_set or {}).items()}
     base_set.update(extra_set)
-    scenes = [_parse_scene(s, f"{where}: scenes[{i}]") for i, s in enumerate(_as_list(raw.get("scenes"), f"{where}: scenes"))]
+    scenes = [
+        _parse_scene(s, f"{where}: scenes[{i}]") for i, s in enumerate(_as_list(raw.get("scenes"), f"{where}: scenes"))
+    ]
     seeds = raw.get("seeds", [0])
     seeds = _as_list(seeds, f"{where}: seeds")
     if not all(isinstance(s, int) and not isinstance(s, bool) for s in seeds):
