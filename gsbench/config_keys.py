@@ -126,7 +126,7 @@ RULES: dict[str, Rule] = {
     "train.densify.max_gaussians": at_least(1),
     "train.eval_every": at_least(0),
     "train.eval_views": at_least(0),  # 0 = no periodic evaluation views,
-    "train.checkpoint_every": at_least(1),
+    "train.checkpoint_every": at_least(0),  # 0 = no intermediate checkpoints
     "train.log_every": at_least(1),
     # priors
     "priors.cache_dir": Rule(kind="str"),
