@@ -47,6 +47,9 @@ def run_budget(res: Results, rid: str) -> tuple[int | None, int | None, str]:
     if not isinstance(data, dict):
         return None, None, "unknown (results.json not an object)"
     budget = data.get("budget")
+    if isinstance(budget, dict) and "rgb_steps" in budget:       # what the methods record (train_summary info)
+        sem = _int(budget.get("semantic_steps"))
+        return _int(budget.get("rgb_steps")), (sem or None), "results budget"
     if isinstance(budget, dict) and "iterations" in budget:
         return _int(budget.get("iterations")), _int(budget.get("semantic_iterations")), "results budget"
     cfg = data.get("config") if isinstance(data.get("config"), dict) else {}
@@ -60,6 +63,7 @@ def run_budget(res: Results, rid: str) -> tuple[int | None, int | None, str]:
     else:
         two = cfg.get("twostage") if isinstance(cfg.get("twostage"), dict) else {}
         sem = _int(two.get("semantic_iterations"))
+        sem = it if sem is None else sem          # null = as many semantic steps as GaussianDS (train.iterations)
     return it, sem, "resolved config" if it is not None else "unknown (no train.iterations)"
 
 

@@ -94,3 +94,19 @@ def test_report_prints_requested_tables(tmp_path: Path, capsys):
                  "--print", "paper_claims"]) == 1  # no ablation ran: no claims table
     err = capsys.readouterr().err
     assert "no table paper_claims" in err and "(tables: budgets)" in err
+
+
+def test_budget_reads_the_methods_record_and_null_semantic_iterations(tmp_path: Path):
+    """results.json `budget` as the methods record it ({rgb_steps, semantic_steps}) wins over the config;
+    a twostage config with semantic_iterations null means train.iterations semantic steps."""
+    t = write_run(tmp_path, "t", method="twostage", scene="s",
+                  config_extra={"train": {"iterations": 500}, "twostage": {"semantic_iterations": None}})
+    t2 = write_run(tmp_path, "t2", method="twostage", scene="s", seed=1,
+                   config_extra={"train": {"iterations": 500}, "twostage": {"semantic_iterations": None}})
+    res = json.loads((t2 / "results.json").read_text())
+    res["budget"] = {"rgb_steps": 300, "semantic_steps": 200}
+    (t2 / "results.json").write_text(json.dumps(res))
+    assert t.exists()
+    (tab,) = budget_table(Results(collect(tmp_path)))
+    got = sorted([c.plain() for c in r.cells] for r in tab.rows)
+    assert got == [["300", "200", "results budget", "1"], ["500", "500", "resolved config", "1"]]

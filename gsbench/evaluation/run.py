@@ -132,7 +132,10 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
                           view_names=out.frames.get("reconstruction", []), frames=out.frames,
                           frames_skipped=frames_skipped, resolution=out.resolution, notes=out.notes,
                           timings=out.timings, memory=_memory(summary, peaks.read()), machine=env_info(),
-                          status=state if state in ("done", "failed", "nonfinite") else "done")
+                          status=state if state in ("done", "failed", "nonfinite") else "done",
+                          train_device=(summary.get("info") or {}).get("device"),
+                          eval_device=str(getattr(method, "device", "cpu")),
+                          budget=(summary.get("info") or {}).get("budget"))
     write_json_atomic(run_dir / "results.json", results)
     return results
 
