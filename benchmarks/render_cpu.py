@@ -22,7 +22,6 @@ Both backends use the same number of threads (torch.get_num_threads(), or --thre
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -32,6 +31,8 @@ import time
 import numpy as np
 
 import gsbench  # noqa: F401  (before torch: gsbench's OpenMP default, the same for both backends)
+
+# isort: split
 import torch
 
 from gsbench.gaussians import GaussianField

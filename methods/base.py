@@ -27,12 +27,11 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
+from gsbench.methods.autoencoder import FeatureAutoencoder
+from gsbench.methods.trainer import TrainViews
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera
 from gsbench.store import load_torch, save_torch_atomic
-
-from gsbench.methods.autoencoder import FeatureAutoencoder
-from gsbench.methods.trainer import TrainViews
 
 QUERY_MODES = ("encode", "decode")
 MODEL_FILE = "model.pt"

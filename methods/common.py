@@ -8,7 +8,6 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
-
 from gsbench.methods.trainer import LossResult, Trainer, TrainViews, periodic_eval
 
 

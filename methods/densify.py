@@ -12,7 +12,7 @@ import math
 import torch
 from torch import nn
 
-from gsbench.gaussians import quat_to_rotmat, normalize_quats
+from gsbench.gaussians import normalize_quats, quat_to_rotmat
 
 
 def inverse_sigmoid(x: torch.Tensor) -> torch.Tensor:

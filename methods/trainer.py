@@ -36,11 +36,10 @@ from tqdm import tqdm
 
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
+from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera
 from gsbench.store import append_jsonl, load_torch, read_jsonl, save_torch_atomic, write_text_atomic
-
-from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
 
 CHECKPOINT = "checkpoint.pt"
 TRAIN_LOG = "train_log.jsonl"

@@ -13,9 +13,9 @@ import torch
 
 from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import fit_priors, resolve_render_backend, run_trainer, uses
+from gsbench.methods.device import resolve_device
 from gsbench.methods.losses import sem_loss
 from gsbench.methods.semantic import build_targets, fit_autoencoder
-from gsbench.methods.device import resolve_device
 from gsbench.methods.trainer import LossResult, field_from_params, load_checkpoint_if_any
 from gsbench.methods.vanilla import rgb_loss_fn
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import torch
 
-from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, l1, reconstruction_loss, sem_loss, solve_scale_shift,
-                                    ssim, tv_loss)
+from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, l1, reconstruction_loss, sem_loss,  # isort: skip
+                                    solve_scale_shift, ssim, tv_loss)
 
 
 # ---------------------------------------------------------------------------- scale / shift

@@ -1,7 +1,6 @@
 """Feature providers: the weight-free text-aligned table, masked crops, missing OpenCLIP weights."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

@@ -19,14 +19,7 @@ from gsbench.reports.plots import pareto_front, train_curve
 from gsbench.reports.stats import pearson
 from gsbench.reports.studies import reconstruction_table
 from gsbench.reports.table import Cell, Column, Row, Table
-from tests.test_report_synthetic import (
-    LAMBDA_DEPTH,
-    LAMBDA_SEM,
-    lambda_miou,
-    make_all,
-    make_main,
-    write_run,
-)
+from tests.test_report_synthetic import LAMBDA_DEPTH, LAMBDA_SEM, lambda_miou, make_all, make_main, write_run
 
 
 @pytest.fixture(scope="module")

@@ -20,8 +20,9 @@ import torch
 from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import fit_priors, resolve_render_backend, run_trainer, uses
 from gsbench.methods.device import resolve_device
-from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, normalised_depth, reconstruction_loss,
-                                   sem_loss, tv_loss)
+
+from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, normalised_depth,  # isort: skip
+                                    reconstruction_loss, sem_loss, tv_loss)
 from gsbench.methods.semantic import build_targets, fit_autoencoder
 from gsbench.methods.trainer import LossResult
 
