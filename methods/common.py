@@ -93,4 +93,5 @@ def run_trainer(config: dict, views: TrainViews, scene, field0: GaussianField, r
     return tr.run(progress=progress, resume_state=st)
 
 
-__all__ = ["uses", "resolve_render_backend", "fit_priors", "run_trainer", "semantic_eval", "LossResult", "cache_dir_for"]
+__all__ = ["uses", "resolve_render_backend", "fit_priors", "run_trainer", "semantic_eval", "LossResult",
+           "cache_dir_for"]

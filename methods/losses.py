@@ -312,7 +312,8 @@ def to_uint8_minmax(values: np.ndarray, valid: np.ndarray) -> Optional[np.ndarra
     return np.clip(np.round(out), 0, 255).astype(np.uint8)
 
 
-def depth_edges(values: np.ndarray, valid: np.ndarray, low: float = 50, high: float = 150, dilate: int = 1) -> np.ndarray:
+def depth_edges(values: np.ndarray, valid: np.ndarray, low: float = 50, high: float = 150,
+                dilate: int = 1) -> np.ndarray:
     """E_d: Canny edges of the depth prior normalised to 8 bits, restricted to valid pixels (bool H x W).
 
     Edges that only mark the border of the invalid region are removed (valid mask eroded by one pixel

@@ -51,7 +51,8 @@ class GaussianDS(Method):
         d = int(g["latent_dim"]) if use["semantics"] else 0
         if use["semantics"]:
             if pri.masks is None or pri.mask_features is None:
-                raise ValueError(f"gaussiands: semantic losses are on but the priors gave no masks/features ({pri.skipped})")
+                raise ValueError(f"gaussiands: semantic losses are on but the priors gave no masks/features "
+                                 f"({pri.skipped})")
             ae_state = (ckpt or {}).get("extra", {}).get("autoencoder")
             ae, ae_stats = fit_autoencoder(pri.mask_features, g["autoencoder"], d, int(config["seed"]))
             if ae_state is not None:
@@ -67,8 +68,10 @@ class GaussianDS(Method):
         if g["losses"]["ds"] and depth is not None:
             e = g["edges"]
             for v in train_ids:
-                edges[v] = torch.as_tensor(depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"], int(e["dilate"])))
-            self.info["edge_fraction"] = float(np.mean([float(x.float().mean()) for x in edges.values()])) if edges else 0.0
+                edges[v] = torch.as_tensor(depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"],
+                                                       int(e["dilate"])))
+            self.info["edge_fraction"] = (float(np.mean([float(x.float().mean()) for x in edges.values()]))
+                                          if edges else 0.0)
             edges = {v: x.to(dev) for v, x in edges.items()}
         # the depth prior on the device once: values (float32), validity (finite and valid), its kind
         dprior = {}
