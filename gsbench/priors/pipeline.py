@@ -38,7 +38,7 @@ PIPELINE_VERSION = 2
 
 @dataclass
 class Priors:
-    """Everything a method gets from the priors stage (see /tmp/TEAM.md, priors interface)."""
+    """Everything a method gets from the priors stage: the one interface between priors and methods (docs/priors.md)."""
 
     order: list[int]
     depth: dict[int, D.DepthPrior] | None

@@ -1,5 +1,5 @@
 """GaussianDS: joint optimisation from scratch of appearance, scale-shift-aligned depth and compact
-semantic latents (paper Sec. III-IV; decisions in shared/GAUSSIANDS.md).
+semantic latents (paper Sec. III-IV; the choices made where the paper is silent: docs/methods.md).
 
     L = L_rec + 0.01 L_depth + 1.5 L_tv + 5.0 L_sem + 1.0 L_ds      (config gaussiands.lambdas)
 
