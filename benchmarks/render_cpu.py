@@ -22,7 +22,6 @@ Both backends use the same number of threads (torch.get_num_threads(), or --thre
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -32,6 +31,8 @@ import time
 import numpy as np
 
 import gsbench  # noqa: F401  (before torch: gsbench's OpenMP default, the same for both backends)
+
+# isort: split
 import torch
 
 from gsbench.gaussians import GaussianField
@@ -117,7 +118,8 @@ def measure_memory(backend: str, width: int, height: int, n: int, n_features: in
     return (_status()["VmHWM"] - before) / 1024.0
 
 
-def _memory_subprocess(backend: str, width: int, height: int, n: int, n_features: int, seed: int, threads: int) -> float:
+def _memory_subprocess(backend: str, width: int, height: int, n: int, n_features: int, seed: int,
+                       threads: int) -> float:
     cmd = [sys.executable, os.path.abspath(__file__), "--_memory", backend, str(width), str(height), str(n),
            "--features", str(n_features), "--seed", str(seed), "--threads", str(threads)]
     res = subprocess.run(cmd, capture_output=True, text=True, check=True)
@@ -133,9 +135,9 @@ def bench_scene(width: int, height: int, n: int, n_features: int, seed: int, rep
         outs[backend], grads[backend] = _step(field, camera, backend)   # warm-up + result
         with torch.no_grad():
             row[f"fwd_ms_{backend}"], row[f"fwd_ms_median_{backend}"] = _time(
-                lambda: render(field, camera, backend=backend), reps)
+                lambda b=backend: render(field, camera, backend=b), reps)
         row[f"fwdbwd_ms_{backend}"], row[f"fwdbwd_ms_median_{backend}"] = _time(
-            lambda: _step(field, camera, backend), reps)
+            lambda b=backend: _step(field, camera, b), reps)
         row[f"peak_mib_{backend}"] = _memory_subprocess(backend, width, height, n, n_features, seed, threads)
         print(f"  {backend}: done", file=sys.stderr, flush=True)
     o_c, o_t = outs["cpu"], outs["torch"]
@@ -159,8 +161,10 @@ def markdown(rows: list[dict]) -> str:
     for r in rows:
         lines.append(
             f"| {r['size']} | {r['gaussians']} | {r['channels']} "
-            f"| {r['fwd_ms_torch']:.1f} / {r['fwd_ms_cpu']:.1f} | {r['fwdbwd_ms_torch']:.1f} / {r['fwdbwd_ms_cpu']:.1f} "
-            f"| {r['peak_mib_torch']:.1f} / {r['peak_mib_cpu']:.1f} | {r['max_abs_diff']:.2e} | {r['grad_rel_diff']:.2e} "
+            f"| {r['fwd_ms_torch']:.1f} / {r['fwd_ms_cpu']:.1f} "
+            f"| {r['fwdbwd_ms_torch']:.1f} / {r['fwdbwd_ms_cpu']:.1f} "
+            f"| {r['peak_mib_torch']:.1f} / {r['peak_mib_cpu']:.1f} "
+            f"| {r['max_abs_diff']:.2e} | {r['grad_rel_diff']:.2e} "
             f"| {r['speedup_fwd']:.1f}x / {r['speedup_fwdbwd']:.1f}x | {r['mem_ratio']:.1f}x |")
     return "\n".join(lines)
 
@@ -186,11 +190,12 @@ def main(argv: list[str] | None = None) -> int:
     for spec in a.scenes.split(","):
         size, n = spec.split("/")
         w, h = (int(v) for v in size.lower().split("x"))
-        print(f"scene {w}x{h}, {n} Gaussians, {4 + a.features} channels, {threads} threads", file=sys.stderr, flush=True)
+        print(f"scene {w}x{h}, {n} Gaussians, {4 + a.features} channels, {threads} threads",
+              file=sys.stderr, flush=True)
         rows.append(bench_scene(w, h, int(n), a.features, a.seed, a.repeats, threads))
     print(markdown(rows))
-    print(f"\nthreads: {threads}; GOMP_SPINCOUNT={os.environ.get('GOMP_SPINCOUNT')}; torch {torch.__version__}; timing: best of repeats; "
-          f"memory: peak RSS increase of one forward+backward in a fresh process")
+    print(f"\nthreads: {threads}; GOMP_SPINCOUNT={os.environ.get('GOMP_SPINCOUNT')}; torch {torch.__version__}; "
+          f"timing: best of repeats; memory: peak RSS increase of one forward+backward in a fresh process")
     if a.json:
         from gsbench.store import write_json_atomic
         write_json_atomic(a.json, {"rows": rows, "threads": threads, "torch": torch.__version__})

@@ -22,13 +22,14 @@ one process on one machine; absolute it/s depend on the machine and its load.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import gsbench  # noqa: F401  (before torch: gsbench's OpenMP default)
+
+# isort: split
 import torch
 
 from gsbench.gaussians import GaussianField
@@ -72,6 +73,7 @@ def reference_its(n: int, w: int, h: int, device: torch.device, iters: int, root
     targets = {i: torch.cat([views.images[i], torch.zeros(h, w, 4, device=device)], -1) for i in ids}
     if device.type == "cuda":
         import gsplat
+
         from gsbench.render.gsplat_backend import gsplat_arguments
         label = "bare gsplat step"
 

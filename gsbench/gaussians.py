@@ -54,7 +54,8 @@ class GaussianField:
                 raise ValueError(f"GaussianField.colors must be (N,3) or (N,K,3), got {tuple(self.colors.shape)}")
         elif self.colors.dim() == 3:
             if self.colors.shape[0] != n or self.colors.shape[2] != 3 or self.colors.shape[1] not in (1, 4, 9, 16):
-                raise ValueError(f"GaussianField.colors SH must be (N,K,3) with K in 1,4,9,16, got {tuple(self.colors.shape)}")
+                raise ValueError(f"GaussianField.colors SH must be (N,K,3) with K in 1,4,9,16, "
+                                 f"got {tuple(self.colors.shape)}")
         else:
             raise ValueError(f"GaussianField.colors must be (N,3) or (N,K,3), got {tuple(self.colors.shape)}")
         if self.features is not None and (self.features.dim() != 2 or self.features.shape[0] != n):

@@ -27,12 +27,11 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
+from gsbench.methods.autoencoder import FeatureAutoencoder
+from gsbench.methods.trainer import TrainViews
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera
 from gsbench.store import load_torch, save_torch_atomic
-
-from gsbench.methods.autoencoder import FeatureAutoencoder
-from gsbench.methods.trainer import TrainViews
 
 QUERY_MODES = ("encode", "decode")
 MODEL_FILE = "model.pt"
@@ -106,7 +105,8 @@ class Method:
         if mode == "encode":
             return feats
         with torch.no_grad():
-            return self.autoencoder.decode(feats.reshape(-1, feats.shape[-1])).reshape(feats.shape[0], feats.shape[1], -1)
+            flat = feats.reshape(-1, feats.shape[-1])
+            return self.autoencoder.decode(flat).reshape(feats.shape[0], feats.shape[1], -1)
 
     def feature_provider(self):
         if self._feature_provider is None:
@@ -119,7 +119,8 @@ class Method:
         _check_mode(mode)
         if not self.has_semantics:
             return None
-        t = torch.as_tensor(np.asarray(self.feature_provider().encode_text(list(texts)), dtype=np.float32), device=self.device)
+        t = torch.as_tensor(np.asarray(self.feature_provider().encode_text(list(texts)), dtype=np.float32),
+                            device=self.device)
         if mode == "decode":
             return _unit(t)
         with torch.no_grad():
@@ -176,7 +177,8 @@ class Method:
             m._backend = resolve_backend_for(saved, dev)
         except InputError:
             m._backend = resolve_backend_for("auto", dev)
-            logging.getLogger(__name__).info("%s: saved backend %s cannot render on %s; using %s", path, saved, dev, m._backend)
+            logging.getLogger(__name__).info("%s: saved backend %s cannot render on %s; using %s",
+                                             path, saved, dev, m._backend)
         m.info = st.get("info", {})
         return m
 
@@ -210,7 +212,8 @@ def load_views(scene, config: dict, progress: bool = False,
     def load(i: int) -> tuple[Camera, torch.Tensor]:
         img = np.asarray(scene.image(i), dtype=np.float32)
         if img.ndim != 3 or img.shape[2] < 3:
-            raise InputError(f"{scene.image_paths[i] if scene.image_paths else scene.path}: expected an RGB image, got shape {img.shape}")
+            raise InputError(f"{scene.image_paths[i] if scene.image_paths else scene.path}: expected an RGB image, "
+                             f"got shape {img.shape}")
         img = img[..., :3]
         if img.shape[1] != W or img.shape[0] != H:
             img = cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA)
@@ -222,7 +225,8 @@ def load_views(scene, config: dict, progress: bool = False,
     n_eval = int(tcfg.get("eval_views") or 0)
     test = list(test_ids)
     if n_eval > 0 and test:
-        pick = [test[int(j)] for j in np.unique(np.linspace(0, len(test) - 1, min(n_eval, len(test))).round().astype(int))]
+        pick = [test[int(j)]
+                for j in np.unique(np.linspace(0, len(test) - 1, min(n_eval, len(test))).round().astype(int))]
         for i in pick:
             views.eval_cameras[i], views.eval_images[i] = load(i)
     return views, (W, H)
@@ -280,7 +284,8 @@ def scene_init(scene, config: dict, feature_dim: int):
     if mode == "frustum":
         meta = getattr(scene, "meta", {}) or {}
         if "near" not in meta or "far" not in meta:
-            raise ValueError(f"{scene.path}: train.init.mode=frustum needs the scene's near/far bounds (LLFF poses_bounds)")
+            raise ValueError(f"{scene.path}: train.init.mode=frustum needs the scene's near/far bounds "
+                             f"(LLFF poses_bounds)")
         near, far = float(meta["near"]), float(meta["far"])
         n = max(1, int(icfg["num_random"]))
         cams = [scene.cameras[i] for i in scene.train_ids] or list(scene.cameras)

@@ -8,7 +8,6 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
-
 from gsbench.methods.trainer import LossResult, Trainer, TrainViews, periodic_eval
 
 
@@ -94,4 +93,5 @@ def run_trainer(config: dict, views: TrainViews, scene, field0: GaussianField, r
     return tr.run(progress=progress, resume_state=st)
 
 
-__all__ = ["uses", "resolve_render_backend", "fit_priors", "run_trainer", "semantic_eval", "LossResult", "cache_dir_for"]
+__all__ = ["uses", "resolve_render_backend", "fit_priors", "run_trainer", "semantic_eval", "LossResult",
+           "cache_dir_for"]

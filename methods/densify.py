@@ -12,7 +12,7 @@ import math
 import torch
 from torch import nn
 
-from gsbench.gaussians import quat_to_rotmat, normalize_quats
+from gsbench.gaussians import normalize_quats, quat_to_rotmat
 
 
 def inverse_sigmoid(x: torch.Tensor) -> torch.Tensor:
@@ -23,7 +23,8 @@ def inverse_sigmoid(x: torch.Tensor) -> torch.Tensor:
 class ParamSet:
     """The trainable tensors of a GaussianField plus their Adam optimiser; rows = Gaussians."""
 
-    def __init__(self, tensors: dict[str, torch.Tensor], lrs: dict[str, float], trainable: set[str] | None = None) -> None:
+    def __init__(self, tensors: dict[str, torch.Tensor], lrs: dict[str, float],
+                 trainable: set[str] | None = None) -> None:
         self.params: dict[str, nn.Parameter] = {}
         groups = []
         for name, t in tensors.items():
@@ -66,7 +67,8 @@ class ParamSet:
         for name, p in list(self.params.items()):
             add = new[name].to(p.data)
             self._swap(name, torch.cat([p.data, add], 0),
-                       lambda v, add=add: torch.cat([v, torch.zeros((add.shape[0],) + v.shape[1:], dtype=v.dtype, device=v.device)], 0))
+                       lambda v, add=add: torch.cat([v, torch.zeros((add.shape[0],) + v.shape[1:], dtype=v.dtype,
+                                                                    device=v.device)], 0))
 
     def set_values(self, name: str, values: torch.Tensor) -> None:
         """Replace a tensor's values and zero its Adam moments (opacity reset)."""
@@ -100,7 +102,8 @@ class DensifyStats:
 
     def append(self, k: int) -> None:
         z = torch.zeros(k, device=self.grad.device)
-        self.grad, self.count, self.max_radii = torch.cat([self.grad, z]), torch.cat([self.count, z]), torch.cat([self.max_radii, z])
+        self.grad, self.count = torch.cat([self.grad, z]), torch.cat([self.count, z])
+        self.max_radii = torch.cat([self.max_radii, z])
 
     def reset(self, n: int) -> None:
         self.__init__(n, self.grad.device)
@@ -195,7 +198,8 @@ def reset_opacity(ps: ParamSet, max_opacity: float = 0.01) -> None:
     ps.set_values("opacity_logits", inverse_sigmoid(torch.minimum(cur, torch.full_like(cur, max_opacity))))
 
 
-def expon_lr(step: int, lr_init: float, lr_final: float, max_steps: int, delay_steps: int = 0, delay_mult: float = 1.0) -> float:
+def expon_lr(step: int, lr_init: float, lr_final: float, max_steps: int, delay_steps: int = 0,
+             delay_mult: float = 1.0) -> float:
     """3DGS exponential learning-rate decay (log-linear from lr_init to lr_final over max_steps)."""
     if lr_init <= 0 or lr_final <= 0:
         return 0.0

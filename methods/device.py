@@ -32,7 +32,8 @@ def resolve_device(config: dict) -> torch.device:
                 raise InputError(f"train.device: {want!r} is not auto, cpu, cuda or cuda:N") from None
         if not torch.cuda.is_available():
             raise InputError(f"train.device={want}: CUDA is not available on this machine "
-                             f"(torch {torch.__version__}, built with CUDA {torch.version.cuda}); use train.device=cpu or auto")
+                             f"(torch {torch.__version__}, built with CUDA {torch.version.cuda}); "
+                             f"use train.device=cpu or auto")
         n = torch.cuda.device_count()
         if idx < 0 or idx >= n:
             raise InputError(f"train.device={want}: this machine has {n} CUDA device(s) (cuda:0..cuda:{n - 1})")
@@ -59,7 +60,8 @@ def resolve_backend_for(backend: str, device: torch.device) -> str:
             log.warning("backend auto on %s: gsplat is not importable, rendering with the torch backend (slow)", device)
             return "torch"
         if backend == "cpu":
-            raise InputError(f"backend=cpu renders on the CPU only but train.device is {device}; use backend auto, gsplat or torch")
+            raise InputError(f"backend=cpu renders on the CPU only but train.device is {device}; "
+                             f"use backend auto, gsplat or torch")
         if backend == "gsplat" and not gsplat_available():
             raise InputError("backend=gsplat: the gsplat package is not importable (pip install 'gsbench[cuda]')")
         return backend
@@ -71,7 +73,8 @@ def resolve_backend_for(backend: str, device: torch.device) -> str:
         try:
             import gsbench.render.cpu_backend  # noqa: F401
         except ImportError as e:
-            raise InputError(f"render backend 'cpu' is not available in this build ({e}); use --set backend=torch") from None
+            raise InputError(f"render backend 'cpu' is not available in this build ({e}); "
+                             f"use --set backend=torch") from None
     elif backend != "torch":
         raise InputError(f"unknown render backend {backend!r}; choose auto, torch, cpu or gsplat")
     return backend

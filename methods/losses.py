@@ -1,4 +1,4 @@
-"""Training losses of the shared trainer and of GaussianDS (paper Sec. III-IV, GAUSSIANDS.md).
+"""Training losses of the shared trainer and of GaussianDS (paper Sec. III-IV, docs/methods.md).
 
 All image tensors are (H, W, C) or (H, W). Every division, sqrt and normalisation is guarded.
 
@@ -12,7 +12,8 @@ All image tensors are (H, W, C) or (H, W). Every division, sqrt and normalisatio
   (1 / max(D, DEPTH_EPS)); `depth`/`metric` with D.
 - `normalised_depth`: D divided by its detached alpha-weighted mean, so L_depth and L_tv are scale-free
   and the paper's lambdas weigh them the same on every scene (GaussianDS feeds this to both terms).
-- `tv_loss`: isotropic TV sqrt(dx^2 + dy^2 + eps) averaged over pixels (the paper writes a sum; see GAUSSIANDS.md).
+- `tv_loss`: isotropic TV sqrt(dx^2 + dy^2 + eps) averaged over pixels (the paper writes a sum; with
+  lambda_tv = 1.5 a sum over pixels would dwarf every other term).
 - `sem_loss`: mean |S_hat - S| over the pixels that have a target (and over the d channels).
 - `depth_edges`: E_d = Canny on the (aligned) prior normalised to 8 bits over its valid pixels, optional dilation.
   Min-max normalisation to 8 bits makes E_d invariant to any alignment s * prior + t with s > 0, so
@@ -312,7 +313,8 @@ def to_uint8_minmax(values: np.ndarray, valid: np.ndarray) -> Optional[np.ndarra
     return np.clip(np.round(out), 0, 255).astype(np.uint8)
 
 
-def depth_edges(values: np.ndarray, valid: np.ndarray, low: float = 50, high: float = 150, dilate: int = 1) -> np.ndarray:
+def depth_edges(values: np.ndarray, valid: np.ndarray, low: float = 50, high: float = 150,
+                dilate: int = 1) -> np.ndarray:
     """E_d: Canny edges of the depth prior normalised to 8 bits, restricted to valid pixels (bool H x W).
 
     Edges that only mark the border of the invalid region are removed (valid mask eroded by one pixel

@@ -140,8 +140,10 @@ def semantic_source(cfg: dict, scene) -> tuple[bool, str]:
     f = cfg["priors"]["features"]["provider"]
     if m in ("gt", "simulated") and not scene.has_instances:
         return False, f"priors.masks.provider={m} needs GT instances and the scene has none (no semantics in the scene)"
-    if f == "text-aligned" and not (scene.has_semantics or (scene.has_instances and scene.instance_classes and scene.class_names)):
-        return False, "priors.features.provider=text-aligned needs GT classes and the scene has none (no semantics in the scene)"
+    if f == "text-aligned" and not (scene.has_semantics
+                                    or (scene.has_instances and scene.instance_classes and scene.class_names)):
+        return False, ("priors.features.provider=text-aligned needs GT classes and the scene has none "
+                       "(no semantics in the scene)")
     return True, ""
 
 

@@ -36,16 +36,16 @@ from tqdm import tqdm
 
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
+from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera
 from gsbench.store import append_jsonl, load_torch, read_jsonl, save_torch_atomic, write_text_atomic
 
-from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
-
 CHECKPOINT = "checkpoint.pt"
 TRAIN_LOG = "train_log.jsonl"
 
-LR_KEYS = {"colors": "color", "opacity_logits": "opacity", "log_scales": "scaling", "quats": "rotation", "features": "semantic"}
+LR_KEYS = {"colors": "color", "opacity_logits": "opacity", "log_scales": "scaling", "quats": "rotation",
+           "features": "semantic"}
 SH_REST = "colors_rest"     # SH bands 1..3 as their own Adam group (3DGS: 1/20 of the base colour LR)
 
 
@@ -79,7 +79,8 @@ def init_field(points: Optional[np.ndarray], colors: Optional[np.ndarray], mode:
         if points is None or len(points) == 0:
             raise InputError("train.init.mode=points but the scene has no sparse points")
         xyz = np.asarray(points, dtype=np.float64)
-        rgb = np.asarray(colors, dtype=np.float64) if colors is not None and len(colors) == len(xyz) else np.full((len(xyz), 3), 0.5)
+        rgb = (np.asarray(colors, dtype=np.float64) if colors is not None and len(colors) == len(xyz)
+               else np.full((len(xyz), 3), 0.5))
         how = f"points ({len(xyz)})"
         if max_points and len(xyz) > int(max_points):
             keep = np.sort(rng.choice(len(xyz), int(max_points), replace=False))
@@ -145,7 +146,8 @@ class Trainer:
                  loss_fn: Callable[[int, RenderOutput, torch.Tensor], LossResult], *, phase: str = "main",
                  iterations: Optional[int] = None, trainable: Optional[set[str]] = None, densify: bool = True,
                  backend: str = "torch", seed: int = 0, extra_state: Optional[Callable[[], dict]] = None,
-                 eval_fn: Optional[Callable[[GaussianField], dict]] = None, device: Optional[torch.device] = None) -> None:
+                 eval_fn: Optional[Callable[[GaussianField], dict]] = None,
+                 device: Optional[torch.device] = None) -> None:
         self.cfg = cfg
         self.tcfg = cfg["train"]
         self.views = views
@@ -225,7 +227,8 @@ class Trainer:
     def _update_lr(self) -> float:
         lr = self.tcfg["lr"]
         v = expon_lr(self.step, lr["position_init"] * self.extent, lr["position_final"] * self.extent,
-                     int(lr["position_max_steps"]), int(lr.get("position_delay_steps", 0) or 0), float(lr["position_delay_mult"]))
+                     int(lr["position_max_steps"]), int(lr.get("position_delay_steps", 0) or 0),
+                     float(lr["position_delay_mult"]))
         g = self.ps.group("means")
         if g is not None:
             g["lr"] = v
@@ -233,7 +236,8 @@ class Trainer:
 
     def _kept(self) -> str:
         ck = self.run_dir / CHECKPOINT
-        return f"the last good checkpoint is kept in {ck}" if ck.exists() else "no checkpoint was written before this step"
+        return (f"the last good checkpoint is kept in {ck}" if ck.exists()
+                else "no checkpoint was written before this step")
 
     def _check_finite(self, what: str, value: torch.Tensor | None = None) -> None:
         if value is not None:
@@ -288,13 +292,15 @@ class Trainer:
             out = render(fld, cam, backend=self.backend, background=self.background)
             res = self.loss_fn(vid, out, gt)
             tot = res.total.detach()
-            bad_step = torch.where((bad_step == 0) & ~torch.isfinite(tot), torch.full_like(bad_step, self.step), bad_step)
+            bad_step = torch.where((bad_step == 0) & ~torch.isfinite(tot), torch.full_like(bad_step, self.step),
+                                   bad_step)
             self.ps.optimizer.zero_grad(set_to_none=True)
             res.total.backward()
             with torch.no_grad():
                 do_stats = self.densify and self.step < int(d["until_iter"])
                 if do_stats and out.radii is not None:
-                    self.stats.update(out.means2d.grad if out.means2d is not None else None, out.radii, cam.width, cam.height)
+                    self.stats.update(out.means2d.grad if out.means2d is not None else None, out.radii,
+                                      cam.width, cam.height)
                 try:
                     self.ps.optimizer.step()
                 except RuntimeError as e:   # e.g. Adam's lr / (1 - beta1) overflows float32 (lr ~1e38)
@@ -321,7 +327,8 @@ class Trainer:
                 skipped[k] = skipped.get(k, 0) + v
             bar.update(1)
             is_log = self.step % log_every == 0 or self.step == self.iterations or bool(info)
-            is_eval = self.eval_fn is not None and eval_every > 0 and (self.step % eval_every == 0 or self.step == self.iterations)
+            is_eval = (self.eval_fn is not None and eval_every > 0
+                       and (self.step % eval_every == 0 or self.step == self.iterations))
             is_ckpt = ckpt_every > 0 and (self.step % ckpt_every == 0) and self.step < self.iterations
             if is_log or is_eval or is_ckpt:
                 # the only host synchronisation of the loop: finiteness, timings and logged values
@@ -348,7 +355,8 @@ class Trainer:
                 acc, acc_w, acc_n, skipped = {}, {}, 0, {}
             if is_eval:
                 ev = self.eval_fn(self.field)
-                append_jsonl(log_path, {"phase": self.phase, "step": self.step, "wall_s": round(self.elapsed, 4), "eval": ev})
+                append_jsonl(log_path, {"phase": self.phase, "step": self.step, "wall_s": round(self.elapsed, 4),
+                                        "eval": ev})
             if is_ckpt:
                 self.save_checkpoint()
         bar.close()

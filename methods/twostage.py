@@ -2,8 +2,9 @@
 
 Stage 1 (`rgb`): RGB-only 3DGS (as `vanilla`, `train.iterations`). Stage 2 (`semantic`): geometry and
 colour frozen, no densification; only the per-Gaussian latents are optimised with L_sem for
-`twostage.semantic_iterations` (null = train.iterations, GaussianDS's semantic budget), from per-frame (unpropagated) masks: ids are not consistent across
-views, so each view's target comes from that view's own mask features only.
+`twostage.semantic_iterations` (null = train.iterations, GaussianDS's semantic budget), from per-frame
+(unpropagated) masks: ids are not consistent across views, so each view's target comes from that view's
+own mask features only.
 """
 from __future__ import annotations
 
@@ -13,9 +14,9 @@ import torch
 
 from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import fit_priors, resolve_render_backend, run_trainer, uses
+from gsbench.methods.device import resolve_device
 from gsbench.methods.losses import sem_loss
 from gsbench.methods.semantic import build_targets, fit_autoencoder
-from gsbench.methods.device import resolve_device
 from gsbench.methods.trainer import LossResult, field_from_params, load_checkpoint_if_any
 from gsbench.methods.vanilla import rgb_loss_fn
 
@@ -45,7 +46,8 @@ class TwoStage(Method):
         if ckpt is not None and ckpt.get("phase") == "semantic":
             rgb_field = None                      # stage 1 finished before the interruption
         else:
-            rgb_field = run_trainer(config, views, scene, field0, run_dir, rgb_loss_fn(float(config["train"]["lambda_dssim"])),
+            rgb_field = run_trainer(config, views, scene, field0, run_dir,
+                                    rgb_loss_fn(float(config["train"]["lambda_dssim"])),
                                     phase="rgb", backend=self._backend, progress=progress, resume=ckpt)
         self.info["device"] = str(dev)
         self.info["budget"] = {"rgb_steps": int(config["train"]["iterations"]),

@@ -31,7 +31,8 @@ class Vanilla(Method):
         views, _ = load_views(scene, config, device=dev)
         field0, how = scene_init(scene, config, 0)
         self.info["init"] = how
-        self.field = run_trainer(config, views, scene, field0, run_dir, rgb_loss_fn(float(config["train"]["lambda_dssim"])),
+        self.field = run_trainer(config, views, scene, field0, run_dir,
+                                 rgb_loss_fn(float(config["train"]["lambda_dssim"])),
                                  phase="main", backend=self._backend, progress=progress,
                                  resume=load_checkpoint_if_any(run_dir))
         self.info["n_gaussians"] = self.field.num

@@ -57,15 +57,17 @@ from __future__ import annotations
 
 from ._common import NEAREST_IMPL, resize_nearest
 from .image import PSNR_IMPL, SSIM_IMPL, psnr, quantize_uint8, ssim, ssim_map
-from .lerf import (CANONICAL_NEGATIVES, LERF_IMPL, LerfPair, LerfSceneResult, box_mean, evaluate_lerf_scene,
-                   lerf_blend, lerf_localization, lerf_mask, lerf_relevancy, majority_smooth, select_level)
-from .ordering import (ORDERING_DISTANCE_IMPL, ORDERING_MASK_IOU_FLOW_IMPL, ORDERING_MASK_IOU_IMPL,
+
+from .lerf import (CANONICAL_NEGATIVES, LERF_IMPL, LerfPair, LerfSceneResult, box_mean,  # isort: skip
+                   evaluate_lerf_scene, lerf_blend, lerf_localization, lerf_mask, lerf_relevancy, majority_smooth,
+                   select_level)
+from .ordering import (ORDERING_DISTANCE_IMPL, ORDERING_MASK_IOU_FLOW_IMPL, ORDERING_MASK_IOU_IMPL,  # isort: skip
                        ORDERING_MASK_IOU_STRICT_IMPL, adjacent_mask_iou, adjacent_mask_iou_flow,
                        adjacent_mask_iou_pairs, adjacent_mask_iou_strict, mean_adjacent_distance)
-from .ovs3d import (OVS3D_IMPL, PIXEL_ACC_IMPL, PIXEL_ACC_RULES, Ovs3dSceneResult, Ovs3dView, evaluate_ovs3d_scene,
-                    ovs3d_predict, ovs3d_view_metrics, pixel_accuracy)
-from .perceptual import (LPIPS_RANGES, LPIPSNet, LPIPSResult, build_lpips_network, find_lpips_weights, load_lpips,
-                         lpips, lpips_impl)
+from .ovs3d import (OVS3D_IMPL, PIXEL_ACC_IMPL, PIXEL_ACC_RULES, Ovs3dSceneResult, Ovs3dView,  # isort: skip
+                    evaluate_ovs3d_scene, ovs3d_predict, ovs3d_view_metrics, pixel_accuracy)
+from .perceptual import (LPIPS_RANGES, LPIPSNet, LPIPSResult, build_lpips_network, find_lpips_weights,  # isort: skip
+                         load_lpips, lpips, lpips_impl)
 from .segmentation import BIOU_IMPL, IOU_IMPL, boundary_band, boundary_iou, boundary_width, iou, mbiou, miou
 from .timing import FPS_IMPL, time_fps
 

@@ -1,4 +1,4 @@
-"""Ordering metrics for the pseudo-video (GAUSSIANDS.md, part 1).
+"""Ordering metrics for the pseudo-video (docs/priors.md, "Ordering and its metrics").
 
 `mean_adjacent_distance`: mean Euclidean distance between the camera centres of neighbouring
 frames of the chain (lower = smoother video).

@@ -10,38 +10,15 @@ from typing import Any, Callable
 
 from gsbench.collect import config_key
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, same
-from gsbench.reports.spec import (
-    AX_FORMULATION,
-    AX_LATENT,
-    AX_LOSSES,
-    AX_NOISE_SEVERITY,
-    AX_NOISE_TYPE,
-    AX_ORDERING,
-    LOSS_SUBSET_ORDER,
-    METHOD_ORDER,
-    REFERENCE_TEXT,
-    STUDIES,
-    STUDY_REFERENCE,
-    method_label,
-    metric_spec,
-)
+
+from gsbench.reports.spec import (AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
+                                  AX_ORDERING, LOSS_SUBSET_ORDER, METHOD_ORDER, REFERENCE_TEXT, STUDIES,
+                                  STUDY_REFERENCE, method_label, metric_spec)
 from gsbench.reports.stats import compare
-from gsbench.reports.studies import (
-    PROTOCOL_ORDER,
-    PROTOCOL_SHORT,
-    _axis_label,
-    _axis_rank,
-    _cell,
-    _combo_text,
-    _eq_filter,
-    _finish,
-    _get,
-    _slug,
-    _spec_for,
-    ordered_methods,
-    runs_of,
-    scene_protocols,
-)
+
+from gsbench.reports.studies import (PROTOCOL_ORDER, PROTOCOL_SHORT, _axis_label, _axis_rank, _cell,  # isort: skip
+                                     _combo_text, _eq_filter, _finish, _get, _slug, _spec_for, ordered_methods, runs_of,
+                                     scene_protocols)
 from gsbench.reports.table import CHECK, Cell, Column, Row, Table
 
 DROPPED_COLUMN = "dropped"

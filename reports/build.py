@@ -17,15 +17,9 @@ from gsbench.collect import collect, read_collected, write_collected
 from gsbench.errors import InputError
 from gsbench.reports import html as html_mod
 from gsbench.reports import plots, shares
-from gsbench.reports.ablations import (
-    depth_formulation_table,
-    latent_diff_table,
-    loss_subsets_table,
-    method_diff_table,
-    noise_table,
-    ordering_table,
-    other_study_tables,
-)
+
+from gsbench.reports.ablations import (depth_formulation_table, latent_diff_table, loss_subsets_table,  # isort: skip
+                                       method_diff_table, noise_table, ordering_table, other_study_tables)
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.claims import claims_table
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null

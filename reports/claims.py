@@ -19,15 +19,9 @@ from typing import Any
 
 from gsbench.reports.ablations import _covered, run_dropped
 from gsbench.reports.data import Results, same
-from gsbench.reports.spec import (
-    AX_FORMULATION,
-    AX_LATENT,
-    AX_LOSSES,
-    AX_NOISE_SEVERITY,
-    AX_NOISE_TYPE,
-    AX_ORDERING,
-    metric_spec,
-)
+
+from gsbench.reports.spec import (AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
+                                  AX_ORDERING, metric_spec)
 from gsbench.reports.stats import Diff, compare, pearson, pearson_interval
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
 from gsbench.reports.sweeps import lambda_points

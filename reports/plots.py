@@ -19,17 +19,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from gsbench.reports.data import Results, is_null, same  # noqa: E402
-from gsbench.reports.spec import (  # noqa: E402
-    AX_LAMBDAS,
-    AX_LATENT,
-    AX_NOISE_SEVERITY,
-    AX_NOISE_TYPE,
-    LOGICAL,
-    NOISE_LABELS,
-    NOISE_ORDER,
-    method_label,
-    metric_spec,
-)
+
+from gsbench.reports.spec import (AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # noqa: E402  # isort: skip
+                                  LOGICAL, NOISE_LABELS, NOISE_ORDER, method_label, metric_spec)
 from gsbench.reports.stats import pearson  # noqa: E402
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, _slug, runs_of, scene_protocols  # noqa: E402
 from gsbench.reports.sweeps import lambda_points  # noqa: E402

@@ -12,21 +12,10 @@ from __future__ import annotations
 from typing import Any
 
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, same
-from gsbench.reports.spec import (
-    AX_FORMULATION,
-    AX_NOISE_TYPE,
-    AX_ORDERING,
-    FORMULATION_LABELS,
-    FORMULATION_ORDER,
-    NOISE_LABELS,
-    NOISE_ORDER,
-    ORDERING_LABELS,
-    ORDERING_ORDER,
-    PROTOCOL_LABELS,
-    MetricSpec,
-    method_label,
-    metric_spec,
-)
+
+from gsbench.reports.spec import (AX_FORMULATION, AX_NOISE_TYPE, AX_ORDERING, FORMULATION_LABELS,  # isort: skip
+                                  FORMULATION_ORDER, NOISE_LABELS, NOISE_ORDER, ORDERING_LABELS, ORDERING_ORDER,
+                                  PROTOCOL_LABELS, MetricSpec, method_label, metric_spec)
 from gsbench.reports.table import Cell, Column, Row, Table, _tex
 
 PROTOCOL_ORDER = ["3dovs", "lerf", None]

@@ -8,17 +8,9 @@ from typing import Any
 from gsbench.reports.data import Results, is_null, same
 from gsbench.reports.spec import AX_LAMBDAS, AX_LATENT, method_label
 from gsbench.reports.stats import pearson, pearson_interval
-from gsbench.reports.studies import (
-    PROTOCOL_SHORT,
-    _axis_label,
-    _cell,
-    _finish,
-    _get,
-    _slug,
-    _spec_for,
-    runs_of,
-    scene_protocols,
-)
+
+from gsbench.reports.studies import (PROTOCOL_SHORT, _axis_label, _cell, _finish, _get, _slug, _spec_for,  # isort: skip
+                                     runs_of, scene_protocols)
 from gsbench.reports.table import Cell, Column, Row, Table, _mark, _tex
 
 # ---------------------------------------------------------------------------- latent d

@@ -116,7 +116,8 @@ def main(argv: list[str] | None = None) -> None:
             return (label, [with_gt_edges(colour(S.segment_view(gt[v], knobs, D.view_rng(0, v, "sim-masks"),
                                                                   img[v], z[v])), gt[v]) for v in VIEWS])
 
-        rows = [("image", [u8[v] for v in VIEWS]), ("GT instances", [with_gt_edges(colour(gt[v]), gt[v]) for v in VIEWS])]
+        rows = [("image", [u8[v] for v in VIEWS]),
+                ("GT instances", [with_gt_edges(colour(gt[v]), gt[v]) for v in VIEWS])]
         rows += [seg_row(f"severity {s}", S.SegmenterKnobs(*(5 * [float(s)]))) for s in range(4)]
         save(out / "priors_severity.png", grid(rows))
 

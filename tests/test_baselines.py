@@ -2,7 +2,6 @@
 frustum initialisation of forward-facing scenes, loss shares in the train log."""
 import numpy as np
 import pytest
-import torch
 
 from gsbench.config import load_config
 from gsbench.methods.base import frustum_points

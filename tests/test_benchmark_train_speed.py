@@ -12,7 +12,8 @@ def test_train_speed_prints_rows_and_writes_json(tmp_path, capsys):
     spec = importlib.util.spec_from_file_location("train_speed", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    assert mod.main(["--sizes", "300@32x24", "--iters", "5", "--devices", "cpu", "--json", str(tmp_path / "r.json")]) == 0
+    assert mod.main(["--sizes", "300@32x24", "--iters", "5", "--devices", "cpu",
+                     "--json", str(tmp_path / "r.json")]) == 0
     out = capsys.readouterr().out
     rows = json.loads((tmp_path / "r.json").read_text())["rows"]
     assert [r["row"] for r in rows] == ["bare cpu-backend step", "vanilla", "gaussiands"]

@@ -10,13 +10,7 @@ import pandas as pd
 import pytest
 
 from gsbench.cli import main
-from gsbench.collect import (
-    BASE_COLUMNS,
-    collect,
-    missing_reason,
-    read_collected,
-    write_collected,
-)
+from gsbench.collect import BASE_COLUMNS, collect, missing_reason, read_collected, write_collected
 from gsbench.errors import InputError
 from tests.test_report_synthetic import make_ablations, make_main, write_run
 

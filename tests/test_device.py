@@ -88,7 +88,8 @@ def test_camera_device_tensors_are_cached_per_device_and_never_pickled():
     cam = Camera(np.array([[50.0, 0, 16], [0, 50.0, 12], [0, 0, 1]]), w2c, 32, 24)
     K, v, c = cam.device_tensors("cpu")
     assert cam.device_tensors("cpu")[0] is K                     # second call: no new copy
-    assert torch.equal(K, torch.tensor(cam.K, dtype=torch.float32)) and torch.equal(v, torch.tensor(w2c, dtype=torch.float32))
+    assert torch.equal(K, torch.tensor(cam.K, dtype=torch.float32))
+    assert torch.equal(v, torch.tensor(w2c, dtype=torch.float32))
     assert np.allclose(c.numpy(), cam.center, atol=1e-6)
     assert cam.device_tensors("cpu", torch.float64)[0].dtype == torch.float64
     small = cam.resized(16, 12)

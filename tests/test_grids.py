@@ -207,7 +207,8 @@ def test_failed_cell_writes_failed_results_and_stays_failed(tmp_path, monkeypatc
     df = collect(tmp_path / "runs")
     psnr = df[df["metric"] == "psnr"]
     assert len(psnr) == 1 and math.isnan(psnr["value"].iloc[0])
-    assert psnr["status"].iloc[0] == "failed" and psnr["reason"].iloc[0].startswith("run failed (attempt 1): RuntimeError: simulated crash")
+    assert psnr["status"].iloc[0] == "failed"
+    assert psnr["reason"].iloc[0].startswith("run failed (attempt 1): RuntimeError: simulated crash")
     assert psnr["axis.train.lambda_dssim"].iloc[0] == 0.2
 
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import torch
 
-from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, l1, reconstruction_loss, sem_loss, solve_scale_shift,
-                                    ssim, tv_loss)
+from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, l1, reconstruction_loss, sem_loss,  # isort: skip
+                                    solve_scale_shift, ssim, tv_loss)
 
 
 # ---------------------------------------------------------------------------- scale / shift
@@ -182,7 +182,8 @@ def test_ssim_matches_skimage_on_interior():
     s1 = F.conv2d(a * a, w, padding=5) - mu1 ** 2
     s2 = F.conv2d(b * b, w, padding=5) - mu2 ** 2
     s12 = F.conv2d(a * b, w, padding=5) - mu1 * mu2
-    m = ((2 * mu1 * mu2 + L.SSIM_C1) * (2 * s12 + L.SSIM_C2) / ((mu1 ** 2 + mu2 ** 2 + L.SSIM_C1) * (s1 + s2 + L.SSIM_C2)))[0, 0]
+    m = ((2 * mu1 * mu2 + L.SSIM_C1) * (2 * s12 + L.SSIM_C2)
+         / ((mu1 ** 2 + mu2 ** 2 + L.SSIM_C1) * (s1 + s2 + L.SSIM_C2)))[0, 0]
     np.testing.assert_allclose(m.numpy()[5:-5, 5:-5], full[5:-5, 5:-5], atol=1e-6)
     # and the scalar loss is the mean of that map
     assert float(ssim(xt, yt)) == pytest.approx(float(m.mean()), abs=1e-9)

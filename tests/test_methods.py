@@ -56,8 +56,8 @@ def test_autoencoder_is_seeded_and_shape():
 
 def _field(n, d=3, features=None):
     g = torch.Generator().manual_seed(0)
-    return GaussianField(torch.randn(n, 3, generator=g), torch.full((n, 3), -2.0), torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1),
-                         torch.zeros(n), torch.rand(n, 1, 3, generator=g),
+    return GaussianField(torch.randn(n, 3, generator=g), torch.full((n, 3), -2.0),
+                         torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1), torch.zeros(n), torch.rand(n, 1, 3, generator=g),
                          features if features is not None else torch.randn(n, d, generator=g))
 
 
@@ -146,11 +146,12 @@ def test_clone_split_prune_counts_and_adam_state():
     ls[3:] = math.log(1.0)          # big (> percent_dense * extent = 0.01): split candidates
     op = ps.params["opacity_logits"].data
     op[:] = 5.0
-    op[2] = -10.0                   # opacity 4.5e-5 < 0.005: pruned (and it is a clone source -> its clone is pruned too)
+    op[2] = -10.0                   # opacity 4.5e-5 < 0.005: pruned (and as a clone source its clone is pruned too)
     stats = DensifyStats(n)
     stats.grad[:] = torch.tensor([1.0, 1.0, 1.0, 1.0, 0.0, 1.0])
     stats.count[:] = 1.0
-    cfg = {"grad_threshold": 0.5, "percent_dense": 0.01, "prune_opacity": 0.005, "max_screen_size": 20, "max_gaussians": 0}
+    cfg = {"grad_threshold": 0.5, "percent_dense": 0.01, "prune_opacity": 0.005, "max_screen_size": 20,
+           "max_gaussians": 0}
     info = densify_and_prune(ps, stats, cfg, extent=1.0, prune_big=False, generator=torch.Generator().manual_seed(0))
     # clones: 0,1,2 (+3); splits: 3,5 -> +4, -2 sources; prune: 2 and its clone
     assert info["cloned"] == 3 and info["split"] == 2
@@ -171,7 +172,8 @@ def test_max_gaussians_cap_and_opacity_reset():
     stats = DensifyStats(10)
     stats.grad[:] = torch.arange(10.0)
     stats.count[:] = 1
-    cfg = {"grad_threshold": 0.5, "percent_dense": 0.01, "prune_opacity": 0.0, "max_screen_size": 20, "max_gaussians": 13}
+    cfg = {"grad_threshold": 0.5, "percent_dense": 0.01, "prune_opacity": 0.0, "max_screen_size": 20,
+           "max_gaussians": 13}
     info = densify_and_prune(ps, stats, cfg, 1.0, False, torch.Generator().manual_seed(0))
     assert ps.num == 13 and info["cloned"] == 3
     ps.params["opacity_logits"].data[:] = 4.0

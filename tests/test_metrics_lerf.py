@@ -8,16 +8,9 @@ import pytest
 import torch
 
 from gsbench.errors import InputError
-from gsbench.metrics import (
-    LerfPair,
-    box_mean,
-    evaluate_lerf_scene,
-    lerf_blend,
-    lerf_localization,
-    lerf_mask,
-    lerf_relevancy,
-    majority_smooth,
-)
+
+from gsbench.metrics import (LerfPair, box_mean, evaluate_lerf_scene, lerf_blend, lerf_localization,  # isort: skip
+                             lerf_mask, lerf_relevancy, majority_smooth)
 
 
 def test_relevancy_hand():

@@ -9,7 +9,6 @@ from gsbench.priors import DepthPrior, Priors, prepare_priors
 from gsbench.priors import cache as C
 from gsbench.priors import depth as D
 from gsbench.priors import features as F
-from gsbench.priors import masks as M
 from gsbench.priors import segmenter as S
 from tests.test_priors_scene import make_sphere_scene
 

@@ -107,7 +107,8 @@ def test_missing_parts_raise_input_error():
         prepare_priors(scene, {"depth": {"provider": "gt"}}, [0], (16, 12), None, True, False, False, progress=False)
     scene.points = None
     with pytest.raises(InputError, match="sparse points"):
-        prepare_priors(scene, {"depth": {"provider": "sparse"}}, [0], (16, 12), None, True, False, False, progress=False)
+        prepare_priors(scene, {"depth": {"provider": "sparse"}}, [0], (16, 12), None, True, False, False,
+                       progress=False)
     with pytest.raises(InputError, match="priors.depth.provider"):
         prepare_priors(scene, {"depth": {"provider": "lidar"}}, [0], (16, 12), None, True, False, False, progress=False)
 

@@ -1,7 +1,6 @@
 """Feature providers: the weight-free text-aligned table, masked crops, missing OpenCLIP weights."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
@@ -134,7 +133,7 @@ def test_feature_knobs_change_the_cache_key_and_per_track_means(tmp_path):
                        views, (48, 36), tmp_path, False, True, True, progress=False)
     assert q.providers["features"].endswith("+track-mean")
     by_track: dict = {}
-    for (v, t), vec in q.mask_features.items():
+    for (_, t), vec in q.mask_features.items():
         by_track.setdefault(t, []).append(vec)
     multi = [vs for vs in by_track.values() if len(vs) > 1]
     assert multi and all(np.array_equal(vs[0], w) for vs in multi for w in vs)

@@ -7,7 +7,6 @@ import pytest
 from gsbench.errors import InputError
 from gsbench.priors import prepare_priors
 from gsbench.priors import segmenter as S
-
 from tests.test_priors_masks import same_partition
 from tests.test_priors_scene import make_sphere_scene
 
@@ -107,7 +106,8 @@ def test_seeded_and_knobs_validated():
     lab = blocks()
     k = S.SegmenterKnobs(2, 2, 2, 2, 0)
     assert np.array_equal(S.segment_view(lab, k, rng(3)), S.segment_view(lab, k, rng(3)))
-    assert S.SegmenterKnobs.from_config({"severity": 2, "failures": {"merge": 0.5}}) == S.SegmenterKnobs(0.5, 2, 2, 2, 2)
+    assert (S.SegmenterKnobs.from_config({"severity": 2, "failures": {"merge": 0.5}})
+            == S.SegmenterKnobs(0.5, 2, 2, 2, 2))
     with pytest.raises(InputError, match="priors.masks.failures"):
         S.SegmenterKnobs.from_config({"failures": {"blur": 1}})
     with pytest.raises(InputError, match="must be >= 0"):

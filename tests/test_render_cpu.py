@@ -151,7 +151,8 @@ def test_hand_gradients_single_pixel():
     cam = Camera(np.array([[10.0, 0, 0.5], [0, 10.0, 0.5], [0, 0, 1]]), np.eye(4), 1, 1)
     a = 0.25
     field = _one_gaussian(2.0, math.log(a / (1 - a)), [0.5, 0.5, 0.5])
-    leaf = GaussianField(**{k: (None if v is None else v.clone().requires_grad_(True)) for k, v in field.tensors().items()})
+    leaf = GaussianField(**{k: (None if v is None else v.clone().requires_grad_(True))
+                            for k, v in field.tensors().items()})
     out = render(leaf, cam, backend="cpu")
     (out.rgb[0, 0, 0] + out.alpha[0, 0]).backward()
     np.testing.assert_allclose(leaf.colors.grad[0].numpy(), [a, 0.0, 0.0], rtol=1e-12)
@@ -205,7 +206,8 @@ def _extreme_fields() -> dict[str, tuple[GaussianField, Camera]]:
     m[:20, 2] = torch.linspace(0.0105, 0.2, 20, dtype=torch.float64)        # just beyond the near plane
     m[20:25, 2] = torch.tensor([0.0099, 0.0, -1.0, 0.005, 0.009], dtype=torch.float64)  # culled
     m[:20, :2] *= 0.01
-    cases["near_plane"] = (GaussianField(m, f.log_scales, f.quats, f.opacity_logits, f.colors, f.features), _camera(32, 32))
+    cases["near_plane"] = (GaussianField(m, f.log_scales, f.quats, f.opacity_logits, f.colors, f.features),
+                           _camera(32, 32))
     f = random_field(60, 14, spread=1.2)                                    # many centres outside the image
     cases["border"] = (f, _camera(32, 24))
     f = random_field(60, 15)
@@ -216,7 +218,8 @@ def _extreme_fields() -> dict[str, tuple[GaussianField, Camera]]:
     f = random_field(40, 16)
     q = f.quats.clone()
     q[::2] = 0.0                                                            # zero quaternions -> identity
-    cases["zero_quats"] = (GaussianField(f.means, f.log_scales, q, f.opacity_logits, f.colors, f.features), _camera(24, 24))
+    cases["zero_quats"] = (GaussianField(f.means, f.log_scales, q, f.opacity_logits, f.colors, f.features),
+                           _camera(24, 24))
     f = random_field(30, 17, scale=(0.05, 0.5))
     cases["one_pixel"] = (f, _camera(1, 1, f=2.0))
     f = random_field(80, 18, scale=(0.1, 0.4))
@@ -270,7 +273,8 @@ def _raster_grads(fn, proj, channels, width, height, seed=3):
     p2 = Projected(proj.ids, full, con, proj.depths, op, proj.radii, proj.cov2d)
     out, t = fn(p2, ch, width, height)
     g = torch.Generator().manual_seed(seed)
-    loss = (out * torch.randn(out.shape, generator=g).to(dt)).sum() + (t * torch.randn(t.shape, generator=g).to(dt)).sum()
+    loss = ((out * torch.randn(out.shape, generator=g).to(dt)).sum()
+            + (t * torch.randn(t.shape, generator=g).to(dt)).sum())
     if loss.requires_grad:
         loss.backward()
     return out.detach(), t.detach(), {"means2d": m2.grad, "conics": con.grad, "opacities": op.grad, "channels": ch.grad}

@@ -64,7 +64,8 @@ def test_split_outputs_channels_and_background():
     assert rgb.dtype == torch.float64 and feats.shape == (H, W, d) and depth.shape == (H, W)
     assert torch.equal(depth, cols[0, ..., 5].double())
     assert torch.equal(feats, cols[0, ..., 3:5].double())
-    assert torch.allclose(rgb[1, 2], cols[0, 1, 2, :3].double() + 0.75 * torch.tensor([1.0, 2.0, 4.0], dtype=torch.float64))
+    assert torch.allclose(rgb[1, 2],
+                          cols[0, 1, 2, :3].double() + 0.75 * torch.tensor([1.0, 2.0, 4.0], dtype=torch.float64))
     assert torch.equal(alpha, torch.full((H, W), 0.25, dtype=torch.float64))
     _, _, none_feats, _ = split_outputs(cols[..., 3:], alph, 0, None, torch.float32)
     assert none_feats is None

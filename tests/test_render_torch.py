@@ -15,8 +15,7 @@ import pytest
 import torch
 
 from gsbench.gaussians import GaussianField
-from gsbench.render import render, rules
-from gsbench.render import torch_backend
+from gsbench.render import render, rules, torch_backend
 from gsbench.scene import Camera
 from tests.naive_render import naive_render, sh_basis, threshold_margins
 

@@ -19,14 +19,7 @@ from gsbench.reports.plots import pareto_front, train_curve
 from gsbench.reports.stats import pearson
 from gsbench.reports.studies import reconstruction_table
 from gsbench.reports.table import Cell, Column, Row, Table
-from tests.test_report_synthetic import (
-    LAMBDA_DEPTH,
-    LAMBDA_SEM,
-    lambda_miou,
-    make_all,
-    make_main,
-    write_run,
-)
+from tests.test_report_synthetic import LAMBDA_DEPTH, LAMBDA_SEM, lambda_miou, make_all, make_main, write_run
 
 
 @pytest.fixture(scope="module")
@@ -198,7 +191,8 @@ def test_html_references_plots_tables_and_provenance(report: Path):
 
 def test_partial_runs_dir(tmp_path: Path):
     root = tmp_path / "runs"
-    write_run(root, "o/random", method="gaussiands", scene="bench", study="ordering", grid={"priors.ordering": "random"},
+    write_run(root, "o/random", method="gaussiands", scene="bench", study="ordering",
+              grid={"priors.ordering": "random"},
               metrics={"ordering_adjacent_distance": 4.0, "ordering_adjacent_mask_iou_strict": 0.25})
     write_run(root, "o/pose", method="gaussiands", scene="bench", study="ordering", grid={"priors.ordering": "pose"},
               metrics={"ordering_adjacent_distance": 1.0, "ordering_adjacent_mask_iou_strict": 0.5})

@@ -9,16 +9,9 @@ import pandas as pd
 
 from gsbench.collect import collect, config_key
 from gsbench.reports.ablations import loss_subsets_table, parse_dropped
-from gsbench.reports.claims import (
-    INCONCLUSIVE,
-    NOT_RUN,
-    NOT_TESTABLE,
-    OPPOSITE,
-    PAPER_CLAIMS,
-    REPRODUCED,
-    claims_table,
-    verdict,
-)
+
+from gsbench.reports.claims import (INCONCLUSIVE, NOT_RUN, NOT_TESTABLE, OPPOSITE, PAPER_CLAIMS,  # isort: skip
+                                    REPRODUCED, claims_table, verdict)
 from gsbench.reports.data import Results
 from tests.test_report_synthetic import write_run
 

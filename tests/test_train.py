@@ -29,7 +29,8 @@ def gds_run(scene, tmp_path_factory):
 
 def test_run_folder_contract(gds_run):
     run, cfg = gds_run
-    for f in ("config.json", "env.json", "status.json", "train_log.jsonl", "checkpoint.pt", "model.pt", "train_summary.json"):
+    for f in ("config.json", "env.json", "status.json", "train_log.jsonl", "checkpoint.pt", "model.pt",
+              "train_summary.json"):
         assert (run / f).exists(), f
     st = read_json(run / "status.json")
     assert st["state"] == "done"
@@ -179,7 +180,8 @@ def test_baselines_tiny(scene, tmp_path, method):
 
 def test_cli_bad_override_is_one_line_error(tmp_path, capsys):
     from gsbench.cli import main
-    rc = main(["train", "--method", "gaussiands", "--scene", str(tmp_path), "--set", "train.iteration=5", "--out", str(tmp_path / "r")])
+    rc = main(["train", "--method", "gaussiands", "--scene", str(tmp_path), "--set", "train.iteration=5",
+               "--out", str(tmp_path / "r")])
     err = capsys.readouterr().err
     assert rc == 1 and "unknown config key 'train.iteration'" in err and len(err.strip().splitlines()) == 1
 

@@ -35,25 +35,11 @@ priors_share (priors shared by several cells), failed (results.json of a failed 
 (the status table), executors (local pool, serial, submitit).
 """
 from gsbench.grids.failed import write_failed_results
-from gsbench.grids.liveness import (
-                                    CELL_FILE,
-                                    CELL_STATUS_FILE,
-                                    HEARTBEAT_S,
-                                    STALE_AFTER_S,
-                                    cell_state,
-                                    pid_alive,
-                                    read_cell_status,
-                                    results_finished,
-)
-from gsbench.grids.planning import (
-                                    CACHE_DIRNAME,
-                                    SCENES_DIRNAME,
-                                    PlannedCell,
-                                    cell_config,
-                                    plan,
-                                    resolve_scene,
-                                    write_manifest,
-)
+
+from gsbench.grids.liveness import (CELL_FILE, CELL_STATUS_FILE, HEARTBEAT_S, STALE_AFTER_S, cell_state,  # isort: skip
+                                    pid_alive, read_cell_status, results_finished)
+from gsbench.grids.planning import (CACHE_DIRNAME, SCENES_DIRNAME, PlannedCell, cell_config, plan,  # isort: skip
+                                    resolve_scene, write_manifest)
 from gsbench.grids.priors_share import prepare_priors_job, priors_request, shared_priors
 from gsbench.grids.running import GridReport, classify, run_cell, run_grid
 from gsbench.grids.spec import GRID_DIR, STUDIES, Cell, Grid, SceneSpec, find_grid, load_grid, parse_grid, shipped_grids

@@ -35,8 +35,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from gsbench.errors import InputError
-from gsbench.priors.weights import require_weights
 from gsbench.priors import warp as W
+from gsbench.priors.weights import require_weights
 
 DEPTH_PROVIDERS = ("gt", "sparse", "depth-anything", "none")
 DEPTH_KINDS = ("disparity", "depth", "metric")

@@ -206,7 +206,8 @@ class OpenClipFeatures(FeatureProvider):
 
     def _check(self, f: np.ndarray, what: str) -> np.ndarray:
         if f.shape[-1] != FEATURE_DIM:
-            raise InputError(f"priors.features: {self.id} gives {f.shape[-1]}-d {what} features, expected {FEATURE_DIM}")
+            raise InputError(f"priors.features: {self.id} gives {f.shape[-1]}-d {what} features, "
+                             f"expected {FEATURE_DIM}")
         return _unit_rows(f)
 
     def encode_text(self, texts: Sequence[str]) -> np.ndarray:

@@ -38,7 +38,7 @@ PIPELINE_VERSION = 2
 
 @dataclass
 class Priors:
-    """Everything a method gets from the priors stage (see /tmp/TEAM.md, priors interface)."""
+    """Everything a method gets from the priors stage: the one interface between priors and methods (docs/priors.md)."""
 
     order: list[int]
     depth: dict[int, D.DepthPrior] | None
@@ -143,7 +143,8 @@ def _compute_masks(scene, masks_cfg: Mapping, views, order, size, images: _Image
         depths, valids = _gt_depths(scene, views, size)
         warper = P.ReprojectWarper({v: W.camera_at(scene.cameras[v], size) for v in views}, depths, valids)
     else:
-        raise InputError(f"priors.masks.propagator: unknown propagator {prop!r} (expected one of {', '.join(PROPAGATORS)})")
+        raise InputError(f"priors.masks.propagator: unknown propagator {prop!r} "
+                         f"(expected one of {', '.join(PROPAGATORS)})")
     min_iou = float(masks_cfg.get("min_iou", P.DEFAULT_MIN_IOU))
     return P.propagate(order, segs, warper, min_iou=min_iou, progress=progress), pid
 
@@ -198,7 +199,8 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
         else:
             params = {k: v for k, v in dcfg.items() if k != "noise"}
             params["seed"] = seed
-            params["model_files"] = _folder_signature(dcfg.get("model_path")) if dcfg.get("provider") == "depth-anything" else []
+            params["model_files"] = (_folder_signature(dcfg.get("model_path"))
+                                     if dcfg.get("provider") == "depth-anything" else [])
             key = cache_key("depth", pid, PIPELINE_VERSION, params, scene_content())
             hit = cache.load("depth", key)
             if hit is not None:
@@ -229,7 +231,8 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
         mcfg = dict(cfg.get("masks", {}) or {})
         prov = mcfg.get("provider", "simulated")
         if prov not in MASK_PROVIDERS:
-            raise InputError(f"priors.masks.provider: unknown provider {prov!r} (expected one of {', '.join(MASK_PROVIDERS)})")
+            raise InputError(f"priors.masks.provider: unknown provider {prov!r} "
+                             f"(expected one of {', '.join(MASK_PROVIDERS)})")
         params = dict(mcfg)
         params.update(seed=seed, per_frame=bool(per_frame_masks),
                       order=list(order) if (prov != "gt" and not per_frame_masks) else None,

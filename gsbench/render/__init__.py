@@ -17,7 +17,8 @@ The numerical rules all backends share are in gsbench/render/rules.py.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field as dc_field
+from dataclasses import dataclass
+from dataclasses import field as dc_field
 from typing import Callable, Optional
 
 import torch

@@ -29,7 +29,6 @@ Camera array layout: R (row-major, 9), t (3), fx, fy, cx, cy, lim_x_neg, lim_x_p
 """
 from __future__ import annotations
 
-
 import numpy as np
 from numba import njit, prange
 

@@ -89,8 +89,8 @@ def project_gaussians(field: GaussianField, camera: Camera) -> Projected:
         ok &= torch.isfinite(cov).all(-1) & torch.isfinite(det) & (det > 0)
         opac = field.opacity
         ok &= opac >= rules.ALPHA_MIN
-        extend = torch.clamp(torch.sqrt(torch.clamp(2.0 * torch.log(torch.clamp(opac, min=rules.ALPHA_MIN) / rules.ALPHA_MIN), min=0.0)),
-                             max=rules.EXTEND_MAX)
+        log_ratio = torch.log(torch.clamp(opac, min=rules.ALPHA_MIN) / rules.ALPHA_MIN)
+        extend = torch.clamp(torch.sqrt(torch.clamp(2.0 * log_ratio, min=0.0)), max=rules.EXTEND_MAX)
         rx = torch.ceil(extend * torch.sqrt(torch.clamp(cov[:, 0], min=0.0)))
         ry = torch.ceil(extend * torch.sqrt(torch.clamp(cov[:, 2], min=0.0)))
         u = K[0, 0] * mc[:, 0] / zs + K[0, 2]

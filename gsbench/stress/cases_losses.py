@@ -8,18 +8,9 @@ import numpy as np
 import torch
 
 from gsbench.gaussians import GaussianField
-from gsbench.stress.core import (
-    Case,
-    CaseResult,
-    _camera,
-    _depth_pair,
-    _field,
-    _grads,
-    _images,
-    _leaf,
-    _result,
-    all_finite,
-)
+
+from gsbench.stress.core import (Case, CaseResult, _camera, _depth_pair, _field, _grads, _images, _leaf,  # isort: skip
+                                 _result, all_finite)
 
 
 def _loss_case(comp: str, fn: Callable[..., Optional[torch.Tensor]], inputs: list, grad_mask: list[bool],
@@ -51,15 +42,8 @@ def _loss_case(comp: str, fn: Callable[..., Optional[torch.Tensor]], inputs: lis
 
 def loss_cases() -> list[Case]:
     """Each training loss in float32 vs float64 on regular and extreme inputs (gradients included)."""
-    from gsbench.methods.losses import (
-        DEPTH_FORMULATIONS,
-        depth_edges,
-        depth_loss,
-        ds_loss,
-        reconstruction_loss,
-        sem_loss,
-        tv_loss,
-    )
+    from gsbench.methods.losses import (DEPTH_FORMULATIONS, depth_edges, depth_loss, ds_loss,  # isort: skip
+                                        reconstruction_loss, sem_loss, tv_loss)
 
     cases: list[Case] = []
 

@@ -9,17 +9,7 @@ import torch
 
 from gsbench.gaussians import GaussianField
 from gsbench.scene import Camera
-from gsbench.stress.core import (
-    Case,
-    CaseResult,
-    _camera,
-    _field,
-    _grads,
-    _result,
-    _to_np,
-    all_finite,
-    compare,
-)
+from gsbench.stress.core import Case, CaseResult, _camera, _field, _grads, _result, _to_np, all_finite, compare
 
 
 def available_backends() -> list[str]:

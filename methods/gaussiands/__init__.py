@@ -1,5 +1,5 @@
 """GaussianDS: joint optimisation from scratch of appearance, scale-shift-aligned depth and compact
-semantic latents (paper Sec. III-IV; decisions in shared/GAUSSIANDS.md).
+semantic latents (paper Sec. III-IV; the choices made where the paper is silent: docs/methods.md).
 
     L = L_rec + 0.01 L_depth + 1.5 L_tv + 5.0 L_sem + 1.0 L_ds      (config gaussiands.lambdas)
 
@@ -20,8 +20,9 @@ import torch
 from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import fit_priors, resolve_render_backend, run_trainer, uses
 from gsbench.methods.device import resolve_device
-from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, normalised_depth, reconstruction_loss,
-                                   sem_loss, tv_loss)
+
+from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, normalised_depth,  # isort: skip
+                                    reconstruction_loss, sem_loss, tv_loss)
 from gsbench.methods.semantic import build_targets, fit_autoencoder
 from gsbench.methods.trainer import LossResult
 
@@ -50,7 +51,8 @@ class GaussianDS(Method):
         d = int(g["latent_dim"]) if use["semantics"] else 0
         if use["semantics"]:
             if pri.masks is None or pri.mask_features is None:
-                raise ValueError(f"gaussiands: semantic losses are on but the priors gave no masks/features ({pri.skipped})")
+                raise ValueError(f"gaussiands: semantic losses are on but the priors gave no masks/features "
+                                 f"({pri.skipped})")
             ae_state = (ckpt or {}).get("extra", {}).get("autoencoder")
             ae, ae_stats = fit_autoencoder(pri.mask_features, g["autoencoder"], d, int(config["seed"]))
             if ae_state is not None:
@@ -66,8 +68,10 @@ class GaussianDS(Method):
         if g["losses"]["ds"] and depth is not None:
             e = g["edges"]
             for v in train_ids:
-                edges[v] = torch.as_tensor(depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"], int(e["dilate"])))
-            self.info["edge_fraction"] = float(np.mean([float(x.float().mean()) for x in edges.values()])) if edges else 0.0
+                edges[v] = torch.as_tensor(depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"],
+                                                       int(e["dilate"])))
+            self.info["edge_fraction"] = (float(np.mean([float(x.float().mean()) for x in edges.values()]))
+                                          if edges else 0.0)
             edges = {v: x.to(dev) for v, x in edges.items()}
         # the depth prior on the device once: values (float32), validity (finite and valid), its kind
         dprior = {}
