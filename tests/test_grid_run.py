@@ -162,8 +162,8 @@ def test_vanilla_cell_real_results(tmp_path):
     assert 5.0 < res["metrics"]["psnr"] < 60.0
     assert res["metrics"]["fps"] > 0 and res["timings"]["train_s"] > 0 and res["memory"]["peak_rss_mb"] > 0
     # vanilla has no semantic field: segmentation and removal are skipped with reasons, values null
-    assert res["metrics"]["miou_3dovs"] is None and "3dovs_encode" in res["skipped"]
-    assert "removal" in res["skipped"] and res["metrics"].get("removal_residual") is None
+    assert res["metrics"]["miou_3dovs"] is None and "miou_3dovs_encode" in res["skipped"]
+    assert "removal_residual" in res["skipped"] and res["metrics"].get("removal_residual") is None
     assert res["metrics"]["lpips"] is None or res["metric_impl"]["lpips"]
     assert "lpips" in res["metric_impl"] or "lpips" in res["skipped"]
 

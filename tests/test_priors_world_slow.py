@@ -22,7 +22,7 @@ OVER = ["backend=cpu", "train.iterations=200", "train.max_width=64", "train.eval
 def world(tmp_path_factory):
     from gsbench.config import load_config
     from gsbench.datasets.synthetic import make_scene
-    from gsbench.evaluate import evaluate_run
+    from gsbench.evaluation import evaluate_run
     from gsbench.runs import train_run
     root = tmp_path_factory.mktemp("world")
     scene = make_scene("tabletop-small", root / "scene", seed=0, views=12, resolution=(64, 48))

@@ -197,6 +197,7 @@ def test_gaussiands_cpu_small_on_tabletop_small(tmp_path):
     assert s["status"] == "done" and s["iterations"] == 500 and s["train_s"] < 600
     res = evaluate_run(run)
     m = res["metrics"]
-    # measured 27.0 dB / 0.79 / 0.59 (README, Methods and training); bounds leave room for backend nondeterminism
+    # measured 25.9 dB, decode mIoU 0.50 / mBIoU 0.30 with the weight-free segmenter at severity 1 (encode
+    # 0.22); the bounds leave room for backend nondeterminism and would catch a semantic field that learns nothing
     assert m["psnr"] > 24.0
-    assert m["miou_3dovs"] > 0.6 and m["mbiou_3dovs"] > 0.4
+    assert m["miou_3dovs"] > 0.35 and m["mbiou_3dovs"] > 0.2
