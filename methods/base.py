@@ -66,6 +66,16 @@ class Method:
     def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:  # pragma: no cover
         raise NotImplementedError
 
+    def _prepare(self, config: dict) -> torch.device:
+        """Keep the config and resolve the training device and render backend, before any work (so a
+        bad device or backend fails at once, not mid-run)."""
+        from gsbench.methods.common import resolve_render_backend
+        from gsbench.methods.device import resolve_device
+        self.config = config
+        dev = resolve_device(config)
+        self._backend = resolve_render_backend(config, dev)
+        return dev
+
     @property
     def backend(self) -> str:
         return self._backend

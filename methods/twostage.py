@@ -13,8 +13,7 @@ from pathlib import Path
 import torch
 
 from gsbench.methods.base import Method, load_views, scene_init
-from gsbench.methods.common import fit_priors, resolve_render_backend, run_trainer, uses
-from gsbench.methods.device import resolve_device
+from gsbench.methods.common import fit_priors, run_trainer, uses
 from gsbench.methods.losses import sem_loss
 from gsbench.methods.semantic import build_targets, fit_autoencoder
 from gsbench.methods.trainer import LossResult, field_from_params, load_checkpoint_if_any
@@ -33,9 +32,7 @@ class TwoStage(Method):
 
     def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
         run_dir = Path(run_dir)
-        self.config = config
-        dev = resolve_device(config)
-        self._backend = resolve_render_backend(config, dev)
+        dev = self._prepare(config)
         views, (W, H) = load_views(scene, config, device=dev)
         sem_steps = semantic_budget(config)
         train_ids = sorted(views.cameras)

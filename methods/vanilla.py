@@ -6,8 +6,7 @@ from pathlib import Path
 import torch
 
 from gsbench.methods.base import Method, load_views, scene_init
-from gsbench.methods.common import resolve_render_backend, run_trainer
-from gsbench.methods.device import resolve_device
+from gsbench.methods.common import run_trainer
 from gsbench.methods.losses import reconstruction_loss
 from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
 
@@ -25,9 +24,7 @@ class Vanilla(Method):
 
     def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
         run_dir = Path(run_dir)
-        self.config = config
-        dev = resolve_device(config)
-        self._backend = resolve_render_backend(config, dev)
+        dev = self._prepare(config)
         views, _ = load_views(scene, config, device=dev)
         field0, how = scene_init(scene, config, 0)
         self.info["init"] = how

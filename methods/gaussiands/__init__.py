@@ -18,8 +18,7 @@ import numpy as np
 import torch
 
 from gsbench.methods.base import Method, load_views, scene_init
-from gsbench.methods.common import fit_priors, resolve_render_backend, run_trainer, uses
-from gsbench.methods.device import resolve_device
+from gsbench.methods.common import fit_priors, run_trainer, uses
 
 from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, normalised_depth,  # isort: skip
                                     reconstruction_loss, sem_loss, tv_loss)
@@ -32,9 +31,7 @@ class GaussianDS(Method):
 
     def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
         run_dir = Path(run_dir)
-        self.config = config
-        dev = resolve_device(config)
-        self._backend = resolve_render_backend(config, dev)
+        dev = self._prepare(config)
         g = config["gaussiands"]
         use = uses(config)
         views, (W, H) = load_views(scene, config, device=dev)
