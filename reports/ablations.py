@@ -284,10 +284,11 @@ def diff_table(res: Results, study: str, table: Table, keys: list[str], groups: 
 def ordering_table(res: Results) -> list[Table]:
     return ablation_table(
         res, "ordering", "ordering", "Pseudo-video ordering",
-        "Ordering strategies for the pseudo-video: mean adjacent camera-centre distance and mean "
-        "adjacent mask IoU of the propagated masks.",
+        "Ordering strategies for the pseudo-video: mean adjacent camera-centre distance, mean "
+        "adjacent mask IoU of the propagated masks (new tracks count as misses), and what the "
+        "supervision they give does to segmentation.",
         [AX_ORDERING], ["Ordering strategy"], ["ordering_adjacent_distance", "ordering_adjacent_mask_iou_strict",
-                                                     "ordering_adjacent_mask_iou_flow"])
+                                              "ordering_adjacent_mask_iou_flow", "miou", "mbiou"])
 
 
 def depth_formulation_table(res: Results) -> list[Table]:
