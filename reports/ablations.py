@@ -9,10 +9,11 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from gsbench.collect import config_key
+from gsbench.methods.registry import method_sort_key
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, same
 
 from gsbench.reports.spec import (AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
-                                  AX_ORDERING, LOSS_SUBSET_ORDER, METHOD_ORDER, REFERENCE_TEXT, STUDIES,
+                                  AX_ORDERING, LOSS_SUBSET_ORDER, REFERENCE_TEXT, STUDIES,
                                   STUDY_REFERENCE, method_label, metric_spec)
 from gsbench.reports.stats import compare
 
@@ -127,9 +128,7 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
     def default_sort(combo: tuple) -> tuple:
         out = []
         for k, v in zip(keys, combo):
-            out.append(
-                (METHOD_ORDER.index(v) if v in METHOD_ORDER else 9, str(v)) if k == "method" else _axis_rank(k, v)
-            )
+            out.append(method_sort_key(v) if k == "method" else _axis_rank(k, v))
         return tuple(out)
 
     n_method = 1 if len(methods) > 1 else 0

@@ -65,8 +65,6 @@ LOGICAL_SPEC = {
 }
 
 PROTOCOL_LABELS = {"3dovs": "3D-OVS protocol", "lerf": "LERF-OVS protocol", None: "no semantic protocol"}
-METHOD_LABELS = {"vanilla": "3DGS (vanilla)", "twostage": "Two-stage", "gaussiands": "GaussianDS"}
-METHOD_ORDER = ["vanilla", "twostage", "gaussiands"]
 
 STUDIES = {
     "reconstruction": "Reconstruction and segmentation per scene (Tables I-III)",
@@ -126,7 +124,9 @@ REFERENCE_TEXT = {
 
 
 def method_label(method: str) -> str:
-    return METHOD_LABELS.get(method, method)
+    """The registered method's report label (gsbench.methods.registry); an unknown name as it is."""
+    from gsbench.methods.registry import METHODS, get_spec
+    return get_spec(method).label if method in METHODS else str(method)
 
 
 def metric_spec(name: str) -> MetricSpec:
