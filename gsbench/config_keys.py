@@ -76,6 +76,7 @@ DEPTH_PROVIDERS = ("gt", "sparse", "depth-anything", "none")
 MASK_PROVIDERS = ("simulated", "sam2", "gt")
 FEATURE_PROVIDERS = ("text-aligned", "openclip")
 PROPAGATORS = ("flow", "reproject")
+NEW_OBJECT_RULES = ("uncarried", "unmatched")
 ORDERINGS = ("pose", "random", "filename")
 NOISE_TYPES = (None, "gaussian", "poisson", "motion_blur", "salt_pepper")
 NOISE_SEVERITIES = (0, 1, 2, 3, 4, 5)
@@ -143,6 +144,7 @@ RULES: dict[str, Rule] = {
     "priors.masks.checkpoint": Rule(kind="str"),
     "priors.masks.model_config": Rule(kind="str"),
     "priors.masks.min_iou": unit(),
+    "priors.masks.new_objects": one_of(*NEW_OBJECT_RULES),
     "priors.features.provider": one_of(*FEATURE_PROVIDERS),
     "priors.features.checkpoint": Rule(kind="str"),
     "priors.features.noise": at_least(0),

@@ -290,6 +290,7 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     from gsbench.priors.features import FEATURE_PROVIDERS
     from gsbench.priors.ordering import ORDERINGS
     from gsbench.priors.pipeline import MASK_PROVIDERS, PROPAGATORS
+    from gsbench.priors.propagation import NEW_OBJECT_RULES
     from gsbench.render import BACKENDS
     assert set(config_keys.HOLDOUTS) == set(HOLDOUT_CHOICES)
     assert set(config_keys.EVAL_RESOLUTIONS) == set(RESOLUTIONS)
@@ -301,6 +302,7 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     assert set(config_keys.MASK_PROVIDERS) == set(MASK_PROVIDERS)
     assert set(config_keys.FEATURE_PROVIDERS) == set(FEATURE_PROVIDERS)
     assert set(config_keys.PROPAGATORS) == set(PROPAGATORS)
+    assert set(config_keys.NEW_OBJECT_RULES) == set(NEW_OBJECT_RULES)
     assert set(config_keys.ORDERINGS) == set(ORDERINGS)
     assert set(config_keys.NOISE_TYPES) == {None, *NOISE_KINDS}
     assert set(config_keys.NOISE_SEVERITIES) == set(SEVERITIES)

@@ -109,6 +109,34 @@ def test_carried_partition_replaces_the_frames_own_segments():
     assert np.all(t[1] == 0)
 
 
+def test_new_objects_rule_decides_whether_a_missed_object_comes_back():
+    # the reference frame missed a 3x3 object inside the background; frame 1's segmenter sees it
+    seg0 = np.zeros((10, 12), np.int32)
+    seg1 = seg0.copy()
+    seg1[2:5, 2:5] = 1
+    identity = lambda prev, cur, lab: (lab.copy(), np.ones(lab.shape, bool))  # noqa: E731
+    t = P.propagate([0, 1], {0: seg0, 1: seg1}, identity, min_track_area=4)
+    assert len(np.unique(t[1])) == 1                      # uncarried: the background track covers it
+    t = P.propagate([0, 1], {0: seg0, 1: seg1}, identity, min_track_area=4, new_objects="unmatched")
+    assert t[1][3, 3] != t[1][0, 0] and np.all(t[1][2:5, 2:5] == t[1][3, 3])
+    assert np.all(t[1][seg1 == 0] == t[0][0, 0])          # the rest stays carried
+    # a part of a split object that overlaps its carried track by >= min_iou stays carried
+    split = np.where(np.arange(12)[None, :] < 6, 0, 1).repeat(10, 0).astype(np.int32)
+    t = P.propagate([0, 1], {0: seg0, 1: split}, identity, min_track_area=4, new_objects="unmatched", min_iou=0.3)
+    assert len(np.unique(t[1])) == 1
+    # below min_track_area a segment is not a new object
+    tiny = seg0.copy()
+    tiny[0, 0] = 1
+    t = P.propagate([0, 1], {0: seg0, 1: tiny}, identity, min_track_area=4, new_objects="unmatched")
+    assert len(np.unique(t[1])) == 1
+    with pytest.raises(ValueError, match="new_objects"):
+        P.propagate([0, 1], {0: seg0, 1: seg1}, identity, new_objects="always")
+    # the rule is part of the masks' provider id (the default keeps the old id)
+    from gsbench.priors.pipeline import _mask_provider_id
+    assert _mask_provider_id({"provider": "simulated", "new_objects": "unmatched"}, False).endswith("+new-unmatched")
+    assert "new-" not in _mask_provider_id({"provider": "simulated"}, False)
+
+
 def test_gt_masks_are_gt_instances():
     scene = make_sphere_scene(3, 64, 48, arc_deg=30.0, heights=(1.5,))
     p = prepare_priors(scene, {"masks": {"provider": "gt"}}, [0, 1, 2], (64, 48), None, False, True, False,

@@ -109,6 +109,8 @@ def _mask_provider_id(masks_cfg: Mapping, per_frame: bool) -> str:
     if p == "simulated":
         knobs = S.SegmenterKnobs.from_config(masks_cfg)
         tail = "per-frame" if per_frame else f"carry-{masks_cfg.get('propagator', 'flow')}"
+        if not per_frame and masks_cfg.get("new_objects", "uncarried") != "uncarried":
+            tail += f"+new-{masks_cfg['new_objects']}"
         return f"sam-sim-v{S.SEGMENTER_VERSION}:{knobs.tag()}+{tail}"
     raise InputError(f"priors.masks.provider: unknown provider {p!r} (expected one of {', '.join(MASK_PROVIDERS)})")
 
@@ -146,7 +148,10 @@ def _compute_masks(scene, masks_cfg: Mapping, views, order, size, images: _Image
         raise InputError(f"priors.masks.propagator: unknown propagator {prop!r} "
                          f"(expected one of {', '.join(PROPAGATORS)})")
     min_iou = float(masks_cfg.get("min_iou", P.DEFAULT_MIN_IOU))
-    return P.propagate(order, segs, warper, min_iou=min_iou, progress=progress), pid
+    rule = masks_cfg.get("new_objects", "uncarried")
+    if rule not in P.NEW_OBJECT_RULES:
+        raise InputError(f"priors.masks.new_objects: unknown rule {rule!r} (expected one of {', '.join(P.NEW_OBJECT_RULES)})")
+    return P.propagate(order, segs, warper, min_iou=min_iou, new_objects=rule, progress=progress), pid
 
 
 def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tuple[int, int],

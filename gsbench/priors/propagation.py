@@ -10,7 +10,16 @@ carried (disocclusions, failed flow, lost tracks), the frame's segments fill in:
 matches a carried track by IoU (Hungarian, scipy's linear_sum_assignment, at least `min_iou`,
 inside the known region) re-seeds that track; an unmatched one of at least `min_track_area`
 pixels starts a new track (a new object). A carried track smaller than `min_track_area` pixels
-is lost and re-seeded from the segments. Two warpers:
+is lost and re-seeded from the segments. `new_objects` says where new tracks may start:
+
+- ``uncarried`` (default): only outside the carried region, so an object the reference frame
+  missed or merged stays missed or merged for as long as the warp carries its surroundings;
+- ``unmatched``: also a segment of at least `min_track_area` pixels whose IoU with every carried
+  track is below `min_iou` (inside the known region) becomes a new track over the carried labels,
+  as a video segmenter with periodic re-detection (DEVA-style) adds objects it did not see before.
+  A part of a split object overlapping its carried track by at least `min_iou` stays carried.
+
+Two warpers:
 
 - `FlowWarper` (``flow``): DIS optical flow (OpenCV) between consecutive frames, each pixel of the
   new frame looks up its source through the backward flow; a forward-backward consistency check
@@ -40,6 +49,7 @@ MIN_TRACK_AREA_FRAC = 0.001
 FB_ALPHA = 0.01
 FB_BETA = 0.5
 MIN_FLOW_SIDE = 16
+NEW_OBJECT_RULES = ("uncarried", "unmatched")
 
 # warp(prev_view, cur_view, prev_labels) -> (labels in cur frame (-1 none), known bool map)
 Warper = Callable[[int, int, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -140,17 +150,30 @@ def iou_matrix(a: np.ndarray, b: np.ndarray, known: np.ndarray | None = None
 def match_segments(warped: np.ndarray, known: np.ndarray, segments: np.ndarray,
                    min_iou: float = DEFAULT_MIN_IOU) -> dict[int, int]:
     """Hungarian matching of segment ids to warped track ids; returns {segment id: track id}."""
-    tracks, segs, iou = iou_matrix(warped, segments, known)
+    return _match(*iou_matrix(warped, segments, known), min_iou)
+
+
+def _match(tracks: np.ndarray, segs: np.ndarray, iou: np.ndarray, min_iou: float) -> dict[int, int]:
     if iou.size == 0:
         return {}
     rows, cols = linear_sum_assignment(-iou)
     return {int(segs[c]): int(tracks[r]) for r, c in zip(rows, cols) if iou[r, c] >= min_iou}
 
 
+def _unmatched_segments(segs: np.ndarray, iou: np.ndarray, min_iou: float) -> set[int]:
+    """Segment ids (seen inside the known region) whose IoU with every carried track is below min_iou."""
+    if len(segs) == 0:
+        return set()
+    best = iou.max(axis=0) if iou.shape[0] else np.zeros(len(segs))
+    return {int(s) for s, b in zip(segs, best) if b < min_iou}
+
+
 def propagate(order: Sequence[int], segments: Mapping[int, np.ndarray], warper: Warper,
               min_iou: float = DEFAULT_MIN_IOU, min_track_area: int | None = None,
-              progress: bool = False) -> dict[int, np.ndarray]:
+              new_objects: str = "uncarried", progress: bool = False) -> dict[int, np.ndarray]:
     """Per-view track maps (int32, -1 none): the reference partition carried along `order`."""
+    if new_objects not in NEW_OBJECT_RULES:
+        raise ValueError(f"new_objects must be one of {NEW_OBJECT_RULES}, got {new_objects!r}")
     tracks: dict[int, np.ndarray] = {}
     next_id = 0
     prev = None
@@ -168,7 +191,15 @@ def propagate(order: Sequence[int], segments: Mapping[int, np.ndarray], warper: 
             if len(lost):
                 carried &= ~np.isin(warped, lost)
             out[carried] = warped[carried]
-            mapping = match_segments(np.where(carried, warped, -1), known, seg, min_iou)
+            tids, sids, iou = iou_matrix(np.where(carried, warped, -1), seg, known)
+            mapping = _match(tids, sids, iou, min_iou)
+            if new_objects == "unmatched":
+                for s in sorted(_unmatched_segments(sids, iou, min_iou) - set(mapping)):
+                    px = seg == s
+                    if int(px.sum()) >= area:
+                        out[px] = next_id
+                        next_id += 1
+                        carried |= px         # settled: the fill below leaves it alone
         fill = ~carried & (seg >= 0)
         for s in np.unique(seg[fill]):
             px = fill & (seg == s)
