@@ -150,7 +150,8 @@ def _compute_masks(scene, masks_cfg: Mapping, views, order, size, images: _Image
     min_iou = float(masks_cfg.get("min_iou", P.DEFAULT_MIN_IOU))
     rule = masks_cfg.get("new_objects", "uncarried")
     if rule not in P.NEW_OBJECT_RULES:
-        raise InputError(f"priors.masks.new_objects: unknown rule {rule!r} (expected one of {', '.join(P.NEW_OBJECT_RULES)})")
+        raise InputError(f"priors.masks.new_objects: unknown rule {rule!r} "
+                         f"(expected one of {', '.join(P.NEW_OBJECT_RULES)})")
     return P.propagate(order, segs, warper, min_iou=min_iou, new_objects=rule, progress=progress), pid
 
 
