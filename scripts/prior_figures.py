@@ -1,10 +1,11 @@
 """Write the pictures of docs/priors.md: the weight-free priors against GT on tabletop-small.
 
-Usage: python scripts/prior_figures.py [--out docs/img] [--scene DIR] [--stats]
-Without --scene, a tabletop-small scene is generated into a temporary folder (seed 0).
---stats prints, instead of drawing, what the ordering changes at the default settings: the
-number of supervision-target pixels that differ between ordering=pose and ordering=random, and
-the adjacent-frame mask IoU of both (lenient, strict, flow).
+Usage: python scripts/prior_figures.py [--out docs/img] [--scene DIR | --preset NAME] [--stats [--seeds N ...]]
+Without --scene, a scene of --preset (default tabletop-small) is generated into a temporary folder (seed 0).
+--stats prints, instead of drawing, what the ordering changes at the default severity: the number
+of supervision-target pixels that differ between ordering=pose and ordering=random, and per prior
+seed, ordering and new-object rule the adjacent-frame mask IoU (lenient, strict, flow) and the
+quality of the targets themselves (gsbench.priors.quality: target pixel accuracy and mIoU).
 Each picture is a grid: one column per view, one row per setting; white lines are GT object
 edges, colours are mask ids (the same colour in two views means the same id only for tracks).
 """
@@ -14,6 +15,7 @@ import argparse
 import logging
 import tempfile
 from pathlib import Path
+from typing import Sequence
 
 import cv2
 import numpy as np
@@ -23,6 +25,9 @@ from gsbench.priors import masks as M
 from gsbench.priors import prepare_priors
 from gsbench.priors import segmenter as S
 from gsbench.priors import warp as W
+from gsbench.priors.features import gt_class_map
+from gsbench.priors.propagation import NEW_OBJECT_RULES
+from gsbench.priors.quality import target_classes, target_quality
 
 log = logging.getLogger(__name__)
 VIEW_INDEX = (4, 5, 6)        # three neighbouring training views
@@ -64,20 +69,38 @@ def save(path: Path, img: np.ndarray) -> None:
     log.info("wrote %s (%d KB)", path, path.stat().st_size // 1024)
 
 
-def ordering_stats(scene, size: tuple[int, int]) -> None:
-    """Print target pixels that differ between pose and random order, and the ordering metrics."""
+def ordering_stats(scene, size: tuple[int, int], seeds: Sequence[int]) -> None:
+    """Print what the ordering changes: differing target pixels (pose vs random, seed 0), and per
+    seed, ordering and new-object rule the adjacent mask IoU and the supervision's own quality."""
     views = list(scene.train_ids)
-    pri = {}
-    for mode in ("pose", "random"):
-        pri[mode] = prepare_priors(scene, {"ordering": mode}, views, size, None, False, True, True, progress=False)
-        s = pri[mode].stats
-        names = {"ordering_adjacent_mask_iou": "lenient", "ordering_adjacent_mask_iou_strict": "strict",
+    names = list(scene.class_names)
+    gt = [gt_class_map(scene, v, size) for v in views]
+    names_iou = {"ordering_adjacent_mask_iou": "lenient", "ordering_adjacent_mask_iou_strict": "strict",
                  "ordering_adjacent_mask_iou_flow": "flow"}
-        print(f"ordering={mode}: masks {pri[mode].providers['masks']}, tracks {s['mask_tracks']}, adjacent mask IoU "
-              + ", ".join(f"{n} {s[k]:.3f}" if s[k] is not None else f"{n} none" for k, n in names.items()))
+    first: dict = {}
+    print("seed  masks                   ordering  tracks  adjacent mask IoU (lenient/strict/flow)  "
+          "target pixel acc  target mIoU  per-class target IoU")
+    for seed in seeds:
+        for rule, mode, per_frame in [("-", "pose", True)] + [(r, m, False) for r in NEW_OBJECT_RULES
+                                                              for m in ("pose", "filename", "random")]:
+            masks_cfg = {"provider": "simulated"} if per_frame else {"provider": "simulated", "new_objects": rule}
+            p = prepare_priors(scene, {"ordering": mode, "masks": masks_cfg}, views, size, None, False, True, True,
+                               per_frame_masks=per_frame, seed=seed, progress=False)
+            if seed == seeds[0] and rule == "uncarried":
+                first[mode] = p
+            text = p.feature_provider.encode_text(names)
+            pred = [target_classes(p.masks[v], {t: f for (w, t), f in p.mask_features.items() if w == v}, text)
+                    for v in views]
+            q = target_quality(pred, gt, len(names))
+            s = p.stats
+            ious = "/".join(f"{s[k]:.3f}" if s.get(k) is not None else "-" for k in names_iou)
+            per_class = " ".join(f"{n} {x:.2f}" for n, x in zip(names, q["iou"]) if x is not None)
+            label = "per-frame" if per_frame else f"carried, {rule}"
+            print(f"{seed:<5d} {label:23s} {mode:9s} {s['mask_tracks']:6d}  {ious:39s}  {q['pixel_acc']:16.3f}  "
+                  f"{q['miou']:11.3f}  {per_class}")
     differ = total = 0
     for v in views:
-        a, b = pri["pose"], pri["random"]
+        a, b = first["pose"], first["random"]
         ma, mb = a.masks[v], b.masks[v]
         fa = np.zeros(ma.shape + (512,), np.float32)
         fb = np.zeros_like(fa)
@@ -86,7 +109,8 @@ def ordering_stats(scene, size: tuple[int, int]) -> None:
                 f[m == t] = p.mask_features[(v, int(t))]
         differ += int((np.abs(fa - fb).max(-1) > 0).sum())
         total += ma.size
-    print(f"supervision-target pixels that differ between pose and random: {differ} of {total}")
+    print(f"supervision-target pixels that differ between pose and random (seed {seeds[0]}, uncarried): "
+          f"{differ} of {total}")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -94,6 +118,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", default="docs/img")
     ap.add_argument("--scene", default=None)
     ap.add_argument("--stats", action="store_true", help="print the ordering figures instead of drawing")
+    ap.add_argument("--preset", default="tabletop-small", help="synthetic scene preset when --scene is not given")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="prior seeds for --stats")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     from gsbench.datasets.loader import load_scene
@@ -101,10 +127,10 @@ def main(argv: list[str] | None = None) -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
-        scene = load_scene(args.scene or make_scene("tabletop-small", Path(tmp) / "s", seed=0))
+        scene = load_scene(args.scene or make_scene(args.preset, Path(tmp) / "s", seed=0))
         size = (scene.cameras[0].width, scene.cameras[0].height)
         if args.stats:
-            ordering_stats(scene, size)
+            ordering_stats(scene, size, args.seeds)
             return
         VIEWS = [sorted(scene.train_ids)[k] for k in VIEW_INDEX]
         gt = {v: M.gt_instance_map(scene, v, size) for v in VIEWS}
