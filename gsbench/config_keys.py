@@ -81,6 +81,7 @@ ORDERINGS = ("pose", "random", "filename")
 NOISE_TYPES = (None, "gaussian", "poisson", "motion_blur", "salt_pepper")
 NOISE_SEVERITIES = (0, 1, 2, 3, 4, 5)
 DEPTH_FORMULATIONS = ("none", "raw_l1", "minmax", "scale_shift", "pearson")
+DS_AVERAGES = ("pixels", "edges")
 INIT_MODES = ("auto", "points", "random")
 QUERY_MODES = ("encode", "decode")
 PROTOCOLS = ("auto", "lerf", "3dovs")
@@ -154,6 +155,7 @@ RULES: dict[str, Rule] = {
     "gaussiands.autoencoder.epochs": at_least(0),
     "gaussiands.autoencoder.lr": positive(),
     "gaussiands.depth_formulation": one_of(*DEPTH_FORMULATIONS),
+    "gaussiands.ds_average": one_of(*DS_AVERAGES),
     "gaussiands.lambdas.depth": at_least(0),
     "gaussiands.lambdas.tv": at_least(0),
     "gaussiands.lambdas.sem": at_least(0),

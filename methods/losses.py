@@ -292,11 +292,20 @@ def sem_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor
     return ((s_hat - target).abs() * w).sum() / n.clamp_min(1.0)
 
 
-def ds_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor, edges: torch.Tensor) -> torch.Tensor:
-    """mean |E_d * (S_hat - S)| over pixels with a target; E_d (H, W) in {0, 1}; 0 when none has one."""
+DS_AVERAGES = ("pixels", "edges")
+
+
+def ds_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor, edges: torch.Tensor,
+            average: str = "pixels") -> torch.Tensor:
+    """|E_d * (S_hat - S)| summed, then averaged over the pixels with a target (``pixels``, the default)
+    or over the edge pixels with a target (``edges``: the same scale as L_sem, whatever share of
+    the image the edges cover). E_d (H, W) in {0, 1}; 0 when no pixel counts."""
+    if average not in DS_AVERAGES:
+        raise ValueError(f"average must be one of {DS_AVERAGES}, got {average!r}")
     w = has_target.to(s_hat.dtype)[..., None]
-    n = w.sum() * s_hat.shape[-1]
-    return ((s_hat - target).abs() * (edges.to(s_hat.dtype)[..., None] * w)).sum() / n.clamp_min(1.0)
+    we = edges.to(s_hat.dtype)[..., None] * w
+    n = (we if average == "edges" else w).sum() * s_hat.shape[-1]
+    return ((s_hat - target).abs() * we).sum() / n.clamp_min(1.0)
 
 
 def to_uint8_minmax(values: np.ndarray, valid: np.ndarray) -> Optional[np.ndarray]:

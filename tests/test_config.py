@@ -283,7 +283,7 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     from gsbench.datasets.splits import HOLDOUT_CHOICES
     from gsbench.evaluation.frames import RESOLUTIONS
     from gsbench.evaluation.segmentation import PROTOCOLS
-    from gsbench.methods.losses import DEPTH_FORMULATIONS
+    from gsbench.methods.losses import DEPTH_FORMULATIONS, DS_AVERAGES
     from gsbench.metrics.lerf import LERF_KERNEL_MODES
     from gsbench.metrics.perceptual import LPIPS_RANGES
     from gsbench.priors.depth import DEPTH_PROVIDERS
@@ -298,6 +298,7 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     assert set(config_keys.LPIPS_INPUTS) == set(LPIPS_RANGES)
     assert set(config_keys.BACKENDS) == {"auto", *BACKENDS}
     assert set(config_keys.DEPTH_FORMULATIONS) == set(DEPTH_FORMULATIONS)
+    assert set(config_keys.DS_AVERAGES) == set(DS_AVERAGES)
     assert set(config_keys.DEPTH_PROVIDERS) == set(DEPTH_PROVIDERS)
     assert set(config_keys.MASK_PROVIDERS) == set(MASK_PROVIDERS)
     assert set(config_keys.FEATURE_PROVIDERS) == set(FEATURE_PROVIDERS)

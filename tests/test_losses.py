@@ -139,6 +139,11 @@ def test_sem_and_ds_hand_values():
     edges = torch.tensor([[1.0, 0.0], [0.0, 1.0]])
     # |E * diff| over the 3 pixels with a target: (1 + 0 + 0) * 1 per channel -> 1/3
     assert float(ds_loss(s_hat, target, has, edges)) == pytest.approx(1.0 / 3.0)
+    # averaged over the edge pixels with a target: only (0, 0) -> 1 (the (1, 1) edge has no target)
+    assert float(ds_loss(s_hat, target, has, edges, "edges")) == pytest.approx(1.0)
+    assert float(ds_loss(s_hat, target, has, torch.zeros(2, 2), "edges")) == 0.0     # no edge: 0, not NaN
+    with pytest.raises(ValueError, match="average"):
+        ds_loss(s_hat, target, has, edges, "mean")
     assert float(sem_loss(s_hat, target, torch.zeros(2, 2, dtype=torch.bool))) == 0.0
 
 

@@ -85,6 +85,7 @@ class GaussianDS(Method):
         form = g["depth_formulation"]
         min_valid = int(g["min_valid_pixels"])
         tv_eps = float(g["tv_eps"])
+        ds_average = str(g.get("ds_average", "pixels"))
 
         def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
             # every value stays on the device: no host synchronisation per step (the trainer reads
@@ -123,7 +124,7 @@ class GaussianDS(Method):
                     if not has_any[vid]:
                         skipped["ds"] = 1
                     else:
-                        ld = ds_loss(out.features, S, has, edges[vid])
+                        ld = ds_loss(out.features, S, has, edges[vid], ds_average)
                         w = float(lam["ds"]) * ld
                         total = total + w
                         terms["ds"], weighted["ds"] = ld.detach(), w.detach()
