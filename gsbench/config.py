@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import functools
 import hashlib
 import json
 import re
@@ -181,6 +182,18 @@ def check_value(key: str, value: Any, leaves: Mapping[str, Any], where: str) -> 
     if rule is not None and not rule.admits(value):
         raise InputError(f"{where}: {key}={given!r} is out of range: must be {rule.describe()}")
     return copy.deepcopy(value)
+
+
+def check_key(key: str, value: Any, where: str = "config") -> Any:
+    """`check_value` against default.yaml: for code that takes a plain config dict (e.g. the priors
+    pipeline called directly) and must hold it to the same rules as a loaded config."""
+    return check_value(key, value, _default_leaves(), where)
+
+
+@functools.lru_cache(maxsize=1)
+def _default_leaves() -> dict[str, Any]:
+    """default.yaml's leaves, read once (check_value only reads them)."""
+    return flatten(default_tree())
 
 
 def apply_overrides(tree: dict, overrides: Mapping[str, Any], where: str = "--set",

@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
+from gsbench.config import check_key
 from gsbench.errors import InputError
 from gsbench.priors import warp as W
 from gsbench.priors.weights import require_weights
@@ -154,14 +155,7 @@ class DepthAnything:
 
 def distortion_of(depth_cfg: Mapping) -> float:
     """The `priors.depth.distortion` severity (>= 0) of the gt provider."""
-    v = depth_cfg.get("distortion", 1)
-    try:
-        v = float(v)
-    except (TypeError, ValueError):
-        raise InputError(f"priors.depth.distortion: must be a number >= 0, got {v!r}") from None
-    if not np.isfinite(v) or v < 0:
-        raise InputError(f"priors.depth.distortion: must be a number >= 0, got {v}")
-    return v
+    return float(check_key("priors.depth.distortion", depth_cfg.get("distortion", 1.0)))
 
 
 def depth_provider_id(depth_cfg: Mapping) -> str | None:
@@ -190,9 +184,10 @@ def compute_depth(scene, depth_cfg: Mapping, view_ids: Sequence[int], size: tupl
         if not scene.has_depth:
             raise InputError(f"{scene.path}: priors.depth.provider=gt needs GT depth and the scene has none "
                              "(use sparse or depth-anything)")
+        distortion = distortion_of(depth_cfg)
         for v in bar(view_ids):
             z = W.resize_nearest(np.asarray(scene.gt_depth(v), dtype=np.float32), size)
-            vals, valid = gt_disparity_prior(z, view_rng(seed, v, "gt-depth"), distortion_of(depth_cfg))
+            vals, valid = gt_disparity_prior(z, view_rng(seed, v, "gt-depth"), distortion)
             out[v] = DepthPrior(vals, valid, "disparity", pid)
     elif p == "sparse":
         if not scene.has_points:

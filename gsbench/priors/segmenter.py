@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from gsbench.config import check_key
 from gsbench.errors import InputError
 
 SEGMENTER_VERSION = 2
@@ -63,18 +64,9 @@ class SegmenterKnobs:
         unknown = sorted(set(failures) - set(FAILURES))
         if unknown:
             raise InputError(f"priors.masks.failures: unknown failure(s) {unknown} (expected {', '.join(FAILURES)})")
-        vals = {}
-        for f in FAILURES:
-            v = failures.get(f)
-            v = sev if v is None else v
-            try:
-                v = float(v)
-            except (TypeError, ValueError):
-                raise InputError(f"priors.masks.failures.{f}: must be a number >= 0, got {v!r}") from None
-            if not np.isfinite(v) or v < 0:
-                raise InputError(f"priors.masks.failures.{f} (or priors.masks.severity): must be >= 0, got {v}")
-            vals[f] = v
-        return cls(**vals)
+        sev = check_key("priors.masks.severity", sev)
+        return cls(**{f: float(check_key(f"priors.masks.failures.{f}", sev if failures.get(f) is None else failures[f]))
+                      for f in FAILURES})
 
     def tag(self) -> str:
         """Compact id part, e.g. 'merge1-split1-miss1-leak1-texture1'."""
