@@ -12,6 +12,13 @@ from gsbench.scene import Camera
 from gsbench.stress.core import Case, CaseResult, _camera, _field, _grads, _result, _to_np, all_finite, compare
 
 
+def _zero_quats(n: int) -> dict:
+    """A field of n Gaussians whose quaternions are all zero (the renderer must not divide by |q|)."""
+    p = _field(n)
+    p["quats"][:] = 0.0
+    return p
+
+
 def available_backends() -> list[str]:
     names = ["torch"]
     try:
@@ -120,11 +127,7 @@ def render_cases(backends: Iterable[str]) -> list[Case]:
         add("opacity 0", lambda: _field(30, opacity_logit=-30.0))
         add("opacity 1", lambda: _field(30, opacity_logit=30.0), check_grad=False)
 
-        def zero_quats():
-            p = _field(30)
-            p["quats"][:] = 0.0
-            return p
-        add("zero quaternions", zero_quats)
+        add("zero quaternions", lambda: _zero_quats(30))
         add("1x1 image", lambda: _field(30), cam_fn=lambda: _camera(1, 1))
         add("single Gaussian", lambda: _field(1, spread=0.0, log_scale=-1.0))
         # 100k Gaussians covering the whole image (a cluster in the middle would leave the border
@@ -192,11 +195,7 @@ def projection_cases() -> list[Case]:
     add("just behind the near plane (z=0.0099)", at_depth(0.0099))
     add("behind the camera (z=-1)", at_depth(-1.0))
 
-    def zq():
-        p = _field(100)
-        p["quats"][:] = 0.0
-        return p
-    add("zero quaternions", zq)
+    add("zero quaternions", lambda: _zero_quats(100))
     add("1x1 image", lambda: _field(100), cam_fn=lambda: _camera(1, 1))
     add("100k Gaussians", lambda: _field(100_000, spread=1.5, log_scale=-4.5), cam_fn=lambda: _camera(48, 48))
     return cases
