@@ -135,15 +135,33 @@ def depth_source(cfg: dict, scene) -> tuple[bool, str]:
 
 
 def semantic_source(cfg: dict, scene) -> tuple[bool, str]:
-    """Can the scene feed the configured mask and feature providers? (ok, reason when not)."""
+    """Can the scene feed the configured mask and feature providers? (ok, reason when not).
+
+    The reason names what the scene lacks: instance maps (only synthetic scenes have them), any
+    labels at all, or labels on a view that is trained on."""
+    from gsbench.datasets.splits import split_ids
+    from gsbench.priors.labels import SOURCE_TEXT, label_source, labelled_views
     m = cfg["priors"]["masks"]["provider"]
     f = cfg["priors"]["features"]["provider"]
-    if m in ("gt", "simulated") and not scene.has_instances:
-        return False, f"priors.masks.provider={m} needs GT instances and the scene has none (no semantics in the scene)"
-    if f == "text-aligned" and not (scene.has_semantics
-                                    or (scene.has_instances and scene.instance_classes and scene.class_names)):
-        return False, ("priors.features.provider=text-aligned needs GT classes and the scene has none "
-                       "(no semantics in the scene)")
+    labels = label_source(scene)
+    none = "(no semantics in the scene)"
+    if m == "simulated" and not scene.has_instances:
+        tail = f"; its {SOURCE_TEXT[labels]} can feed priors.masks.provider=gt" if labels else f" {none}"
+        return False, ("priors.masks.provider=simulated needs GT instance maps (synthetic scenes) and the scene "
+                       f"has none{tail}")
+    if m == "gt" and not scene.has_instances and labels is None:
+        return False, ("priors.masks.provider=gt needs GT instance maps, 3D-OVS class masks or LERF-OVS labels, "
+                       f"and the scene has none of them {none}")
+    if f == "text-aligned" and not (labels or (scene.has_instances and scene.instance_classes and scene.class_names)):
+        return False, ("priors.features.provider=text-aligned needs GT classes (3D-OVS class masks, LERF-OVS labels "
+                       f"or a synthetic scene's instance classes) and the scene has none {none}")
+    if labels and not scene.has_instances and (m == "gt" or f == "text-aligned"):
+        train, _ = split_ids(scene, cfg)
+        lab = labelled_views(scene)
+        if not set(train) & set(lab):
+            holdout = (cfg.get("train") or {}).get("holdout", "every-8")
+            return False, (f"the scene's {SOURCE_TEXT[labels]} are on {len(lab)} views, none of them trained on "
+                           f"(train.holdout={holdout}): no view to take semantic targets from")
     return True, ""
 
 

@@ -1,9 +1,11 @@
 """Feature providers: 512-d unit vectors per mask and per text query (one shared space).
 
-- ``text-aligned`` (weight-free simulation for synthetic scenes, CLIP-like): text and image
+- ``text-aligned`` (weight-free, CLIP-like, for scenes with labels): text and image
   vectors live in `gsbench.priors.clipspace` (CLIP's narrow cone and modality gap). A mask's
   vector is computed from what the mask covers, as CLIP sees a crop: the pixel-weighted mix of
-  the GT classes inside the mask (pixels with no class count as background), plus a share
+  the GT classes inside the mask (3D-OVS classes, a synthetic scene's instance classes, or LERF
+  label categories: `named_class_map`; a view without labels gets no mask feature; pixels with
+  no class count as background), plus a share
   ``context`` of the classes in the ring around it (its bounding box grown by half its size,
   minus the mask: the crop's surroundings), plus a per-mask noise direction of weight ``noise``
   seeded by (seed, view, the mask's pixels). A leaking or merged mask gets a blended vector, and one
@@ -71,11 +73,17 @@ def _number(value, key: str, hi: float | None = None) -> float:
     return v
 
 
-def gt_class_map(scene, view: int, size: tuple[int, int]) -> np.ndarray:
-    """GT class index per pixel of `view` at `size` = (W, H) (-1 none)."""
+def named_class_map(scene, view: int, size: tuple[int, int]) -> tuple[np.ndarray | None, list[str]]:
+    """GT class per pixel of `view` at `size` = (W, H) (-1 none) and the names its indices refer to.
+
+    From 3D-OVS class masks, else instance maps with instance classes (synthetic scenes), else LERF
+    label polygons (categories). The map is None when the view has no labels: its masks get no
+    feature, hence no semantic target."""
+    from gsbench.priors.labels import label_view
     from gsbench.priors.warp import resize_nearest
     if scene.has_semantics:
-        return resize_nearest(np.asarray(scene.gt_classes(view)).astype(np.int64), size)
+        c = scene.gt_classes(view)
+        return (None if c is None else resize_nearest(np.asarray(c).astype(np.int64), size)), list(scene.class_names)
     if scene.has_instances and scene.instance_classes and scene.class_names:
         inst = resize_nearest(np.asarray(scene.gt_instances(view)).astype(np.int64), size)
         lut = {int(k): int(c) for k, c in scene.instance_classes.items()}
@@ -84,9 +92,17 @@ def gt_class_map(scene, view: int, size: tuple[int, int]) -> np.ndarray:
         out = np.full(inst.shape, -1, np.int64)
         pos = np.isin(inst, keys)
         out[pos] = vals[np.searchsorted(keys, inst[pos])]
-        return out
-    raise InputError(f"{scene.path}: priors.features.provider=text-aligned needs GT classes "
-                     "(a synthetic scene); use openclip for real scenes")
+        return out, list(scene.class_names)
+    if scene.has_labels:
+        lv = label_view(scene, view, size)
+        return (None, list(scene.queries)) if lv is None else (lv.classes.astype(np.int64), lv.names)
+    raise InputError(f"{scene.path}: priors.features.provider=text-aligned needs GT classes (3D-OVS class "
+                     "masks, LERF-OVS labels or a synthetic scene's instances); use openclip otherwise")
+
+
+def gt_class_map(scene, view: int, size: tuple[int, int]) -> np.ndarray | None:
+    """GT class index per pixel of `view` at `size` = (W, H) (-1 none); None for a view without labels."""
+    return named_class_map(scene, view, size)[0]
 
 
 def class_shares(cls: np.ndarray, region: np.ndarray, names: Sequence[str]) -> dict[str, float]:
@@ -131,9 +147,10 @@ class TextAlignedFeatures(FeatureProvider):
 
     def mask_shares(self, scene, view: int, labels: np.ndarray) -> dict[int, dict[str, float]]:
         """Per mask id: {class name: weight} of the mask's pixels mixed with its context ring."""
-        cls = gt_class_map(scene, view, (labels.shape[1], labels.shape[0]))
-        names = list(scene.class_names)
-        out = {}
+        cls, names = named_class_map(scene, view, (labels.shape[1], labels.shape[0]))
+        out: dict[int, dict[str, float]] = {}
+        if cls is None:   # a view without labels: its masks cannot be named
+            return out
         for i in label_ids(labels):
             m = labels == i
             inside = class_shares(cls, m, names)

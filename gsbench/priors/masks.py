@@ -1,6 +1,8 @@
 """Mask providers: per-view segments and view-consistent tracks.
 
-- ``gt``: the scene's GT instances (ids already consistent): the upper bound.
+- ``gt``: the scene's GT instances (ids already consistent): the upper bound. A scene without
+  instance maps (a real layout) gives its labels instead (`gsbench.priors.labels`: 3D-OVS class
+  components or LERF label objects; provider id ``gt-labels:<source>``).
 - ``simulated`` (weight-free): per-view segments from `gsbench.priors.segmenter` (a SAM-like
   segmenter with five failure knobs), then carried along the pseudo-video by
   `gsbench.priors.propagation`, which replaces each view's own partition by the carried one.

@@ -23,6 +23,7 @@ from tqdm.auto import tqdm
 from gsbench.errors import InputError
 from gsbench.metrics import ordering as MO
 from gsbench.priors import depth as D
+from gsbench.priors import labels as L
 from gsbench.priors import masks as M
 from gsbench.priors import propagation as P
 from gsbench.priors import segmenter as S
@@ -102,10 +103,14 @@ def _gt_depths(scene, views, size):
     return depths, valids
 
 
-def _mask_provider_id(masks_cfg: Mapping, per_frame: bool) -> str:
+def _mask_provider_id(masks_cfg: Mapping, per_frame: bool, scene=None) -> str:
+    """The masks' provider id; `gt` names where its masks come from: the scene's instance maps, or
+    (a scene without them, e.g. a real layout) its labels (`gsbench.priors.labels`)."""
     p = masks_cfg.get("provider", "simulated")
     if p == "gt":
-        return "gt-instances"
+        if scene is None or scene.has_instances:
+            return "gt-instances"
+        return f"gt-labels:{L.label_source(scene)}"
     if p == "simulated":
         knobs = S.SegmenterKnobs.from_config(masks_cfg)
         tail = "per-frame" if per_frame else f"carry-{masks_cfg.get('propagator', 'flow')}"
@@ -124,8 +129,10 @@ def _compute_masks(scene, masks_cfg: Mapping, views, order, size, images: _Image
         if per_frame:
             return sam.per_frame(views, imgs, progress), sam.id + "+per-frame"
         return sam.propagate(order, imgs, progress), sam.id + "+video"
-    pid = _mask_provider_id(masks_cfg, per_frame)
+    pid = _mask_provider_id(masks_cfg, per_frame, scene)
     if p == "gt":
+        if not scene.has_instances:
+            return L.label_masks(scene, views, size)[0], pid
         return {v: M.gt_instance_map(scene, v, size) for v in views}, pid
     # simulated
     knobs = S.SegmenterKnobs.from_config(masks_cfg)
@@ -245,6 +252,9 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
                       sim_version=M.SIM_VERSION)
         if prov == "sam2":
             params["model_files"] = _folder_signature(mcfg.get("checkpoint"))
+        from_labels = prov == "gt" and not scene.has_instances
+        if from_labels:
+            params["labels"] = L.label_digest(scene, views)
         mkey = cache_key("masks", prov, PIPELINE_VERSION, params, scene_content())
         hit = cache.load("masks", mkey)
         if hit is not None:
@@ -258,6 +268,8 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
         providers["masks"] = mid
         ids = np.unique(np.concatenate([m[m >= 0].ravel() for m in masks.values()])) if masks else []
         stats["mask_tracks"] = int(len(ids))
+        if from_labels:   # views without labels have no segment, hence no semantic target
+            stats["mask_labelled_views"] = int(sum(bool((masks[v] >= 0).any()) for v in views))
         # adjacent mask IoU of the propagated masks (the ordering study's second metric)
         strict_keys = ("ordering_adjacent_mask_iou", "ordering_adjacent_mask_iou_strict",
                        "ordering_adjacent_mask_iou_flow")
