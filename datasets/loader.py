@@ -183,15 +183,11 @@ def _attach_lerf(scene: Scene, root: Path) -> None:
     for i, f in files.items():
         info, objs = ovs.read_lerf_label(f)
         cam = scene.cameras[i]
-        w, h = info.get("width"), info.get("height")
-        scene.label_sizes[i] = (int(w), int(h)) if w is not None and h is not None else (cam.width, cam.height)
+        w, h = ovs.label_size(f, info, cam.name, cam.width, cam.height)
+        scene.label_sizes[i] = (w, h)
         scene.raw_labels[i] = objs
-        if w is not None and h is not None and (int(w), int(h)) != (cam.width, cam.height):
-            sx, sy = cam.width / float(w), cam.height / float(h)
-            if abs(sx - sy) > 0.01 * max(sx, sy):
-                raise InputError(f"{f}: label size {w}x{h} has another aspect ratio than image {cam.name} "
-                                 f"({cam.width}x{cam.height})")
-            objs = ovs.scale_labels(objs, sx, sy)
+        if (w, h) != (cam.width, cam.height):
+            objs = ovs.scale_labels(objs, cam.width / float(w), cam.height / float(h))
             scene.meta["labels_rescaled"] = True
         parsed[i] = objs
         queries.update(o.category for o in objs)

@@ -43,8 +43,17 @@ def read_classes(seg_dir: Path) -> list[str]:
     return sorted(names)
 
 
-def scan_segmentations(seg_dir: Path, class_names: list[str], n_views: int) -> dict[int, dict[str, Path]]:
-    """view index -> {class name: mask file}; unknown classes and out-of-range views are errors."""
+def _problem(problems: list[str] | None, message: str) -> None:
+    """Raise `message`, or collect it when the caller lists problems (`gsbench data check`)."""
+    if problems is None:
+        raise InputError(message)
+    problems.append(message)
+
+
+def scan_segmentations(seg_dir: Path, class_names: list[str], n_views: int,
+                       problems: list[str] | None = None) -> dict[int, dict[str, Path]]:
+    """view index -> {class name: mask file}; unknown classes and out-of-range views are errors
+    (raised, or appended to `problems` and left out when a list is given)."""
     seg_dir = Path(seg_dir)
     out: dict[int, dict[str, Path]] = {}
     known = set(class_names)
@@ -52,16 +61,19 @@ def scan_segmentations(seg_dir: Path, class_names: list[str], n_views: int) -> d
         if not d.is_dir() or d.name.startswith("."):
             continue
         if not d.name.isdigit():
-            raise InputError(f"{d}: segmentation folder name is not an image index")
+            _problem(problems, f"{d}: segmentation folder name is not an image index")
+            continue
         idx = int(d.name)
         if idx >= n_views:
-            raise InputError(f"{d}: image index {idx} but the scene has {n_views} images")
+            _problem(problems, f"{d}: image index {idx} but the scene has {n_views} images")
+            continue
         files = {}
         for f in sorted(d.iterdir()):
             if f.suffix.lower() != ".png" or f.name.startswith("."):
                 continue
             if f.stem not in known:
-                raise InputError(f"{f}: class {f.stem!r} is not in {seg_dir / 'classes.txt'}")
+                _problem(problems, f"{f}: class {f.stem!r} is not in {seg_dir / 'classes.txt'}")
+                continue
             files[f.stem] = f
         out[idx] = files
     return out
@@ -101,8 +113,9 @@ def find_label_dir(root: Path) -> Path | None:
     return None
 
 
-def label_files(label_dir: Path, n_views: int) -> dict[int, Path]:
-    """view index -> label file; frame_XXXXX is index XXXXX - 1 of the sorted image list."""
+def label_files(label_dir: Path, n_views: int, problems: list[str] | None = None) -> dict[int, Path]:
+    """view index -> label file; frame_XXXXX is index XXXXX - 1 of the sorted image list (a frame
+    beyond the images is raised, or appended to `problems` and left out when a list is given)."""
     out = {}
     for p in sorted(Path(label_dir).iterdir()):
         m = FRAME_RE.match(p.name)
@@ -110,9 +123,30 @@ def label_files(label_dir: Path, n_views: int) -> dict[int, Path]:
             continue
         idx = int(m.group(1)) - 1
         if not 0 <= idx < n_views:
-            raise InputError(f"{p}: frame number {idx + 1} is outside the {n_views} images (frame_00001 is the first)")
+            _problem(problems, f"{p}: frame number {idx + 1} is outside the {n_views} images "
+                               "(frame_00001 is the first)")
+            continue
         out[idx] = p
     return out
+
+
+def label_size(path: Path, info: dict, image_name: str, width: int, height: int) -> tuple[int, int]:
+    """(W, H) a label file was drawn at: `info.width/height`, else the image's size. A label of
+    another aspect ratio than its image is an error (it cannot be scaled onto it)."""
+    w, h = info.get("width"), info.get("height")
+    if w is None or h is None:
+        return width, height
+    try:
+        w, h = int(w), int(h)
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: info.width / info.height are not integers ({w!r}, {h!r})") from None
+    if w < 1 or h < 1:
+        raise InputError(f"{path}: label size {w}x{h} is not positive")
+    sx, sy = width / float(w), height / float(h)
+    if abs(sx - sy) > 0.01 * max(sx, sy):
+        raise InputError(f"{path}: label size {w}x{h} has another aspect ratio than image {image_name} "
+                         f"({width}x{height})")
+    return w, h
 
 
 def _points(seg, path: Path, k: int) -> list[np.ndarray]:

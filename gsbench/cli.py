@@ -24,6 +24,7 @@ COMMANDS = {
     "report": ("report", "write tables, plots and a static HTML report from collected results"),
     "stress": ("stress", "run the numerical stress battery against float64 references"),
     "points": ("points", "triangulate sparse points from known poses (SIFT + pycolmap) into sparse/0"),
+    "data": ("data", "dataset folders: `data check PATH` lists the layout, labels and every problem"),
 }
 LOG_FORMAT = "gsbench: %(message)s"
 DEBUG_LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
