@@ -79,8 +79,16 @@ def _mask_size(root):
     return f, "mask is 16x12, image is 32x24"
 
 
+def _mask_values(root):
+    import cv2
+    f = root / "segmentations" / "004" / "floor.png"
+    m = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
+    cv2.imwrite(str(f), (m > 0).astype(np.uint8))      # a 0/1 mask: the protocols read only 255 as foreground
+    return f, "neither 0 nor 255"
+
+
 @pytest.mark.parametrize("breaker", [_missing_class_mask, _label_aspect, _frame_beyond_images, _pose_count,
-                                     _mask_size])
+                                     _mask_size, _mask_values])
 def test_broken_copy_one_problem_line_naming_the_file(copy, capsys, breaker):
     f, what = breaker(copy)
     # poses_bounds.npy is read as the 3D-OVS protocol reads it (layout 3dovs); the rest as detected

@@ -29,7 +29,7 @@ from gsbench.priors import propagation as P
 from gsbench.priors import segmenter as S
 from gsbench.priors import warp as W
 from gsbench.priors.cache import PriorCache, cache_key, scene_content_hash
-from gsbench.priors.features import FeatureProvider, get_feature_provider
+from gsbench.priors.features import FeatureProvider, TextAlignedFeatures, get_feature_provider
 from gsbench.priors.ordering import ORDERINGS, camera_centers, order_views
 
 MASK_PROVIDERS = ("simulated", "gt", "sam2")
@@ -304,6 +304,8 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
         fparams["seed"] = seed
         if (cfg.get("features", {}) or {}).get("provider") == "openclip":
             fparams["model_files"] = _folder_signature(cfg["features"].get("checkpoint"))
+        if isinstance(fprov, TextAlignedFeatures) and not scene.has_instances and L.label_source(scene):
+            fparams["labels"] = L.label_digest(scene, views)   # the classes it names masks by
         fkey = cache_key("features", fprov.id, PIPELINE_VERSION, fparams, {"masks": mkey})
         hit = cache.load("features", fkey)
         if hit is not None:
