@@ -75,14 +75,14 @@ def _views(root: Path, layout: str, rep: FolderReport):
     except InputError as e:
         rep.problems.append(str(e))
         return None, [], []
-    names, sizes = [], []
-    for p in paths:
+    names, sizes = [p.name for p in paths], []
+    for p in paths:   # an unreadable image keeps its place: label indices count every image
         try:
             sizes.append(image_size(p))
-            names.append(p.name)
         except InputError as e:
             rep.problems.append(str(e))
-    rep.facts.append(f"views     {len(names)} images, {_sizes_text(sizes)}")
+            sizes.append(None)
+    rep.facts.append(f"views     {len(names)} images, {_sizes_text(x for x in sizes if x)}")
     rep.facts.append("poses     none usable (see the problems)")
     return None, names, sizes
 
@@ -107,7 +107,7 @@ def _check_3dovs(root: Path, names: list[str], sizes: list, rep: FolderReport) -
                                     "the 3D-OVS reference stops on it, gsbench scores the class as empty)")
                 continue
             try:
-                m = read_gray(f, sizes[i])
+                m = read_gray(f, sizes[i])   # sizes[i] None (unreadable image): no size check
             except InputError as e:
                 rep.problems.append(str(e))
                 continue
@@ -130,10 +130,14 @@ def _check_lerf(root: Path, names: list[str], sizes: list, rep: FolderReport) ->
         f = files[i]
         try:
             info, objs = ovs.read_lerf_label(f)
-            w, h = ovs.label_size(f, info, names[i], *sizes[i])
+            w, h = ovs.label_size(f, info, names[i], *sizes[i]) if sizes[i] else (info.get("width"), info.get("height"))
         except InputError as e:
             rep.problems.append(str(e))
             continue
+        named = info.get("name")
+        if isinstance(named, str) and named and Path(named).stem != f.stem:
+            rep.problems.append(f"{f}: info.name is {named!r} but the file name makes it view {i} ({names[i]}); "
+                                "LangSplat's evaluation indexes frames by info.name")
         queries.update(o.category for o in objs)
         lines.append(f"  view {i:3d} {names[i]}: {f.name} {w}x{h}, {len(objs)} objects")
     rep.facts.append(f"LERF-OVS  {len(lines)} labelled frames ({ldir})")

@@ -87,8 +87,16 @@ def _mask_values(root):
     return f, "neither 0 nor 255"
 
 
+def _label_name(root):
+    f = label_dir(root) / "frame_00002.json"
+    d = json.loads(f.read_text())
+    d["info"]["name"] = "frame_00003.jpg"          # LangSplat would score this file against view 2, gsbench view 1
+    f.write_text(json.dumps(d))
+    return f, "info.name is 'frame_00003.jpg'"
+
+
 @pytest.mark.parametrize("breaker", [_missing_class_mask, _label_aspect, _frame_beyond_images, _pose_count,
-                                     _mask_size, _mask_values])
+                                     _mask_size, _mask_values, _label_name])
 def test_broken_copy_one_problem_line_naming_the_file(copy, capsys, breaker):
     f, what = breaker(copy)
     # poses_bounds.npy is read as the 3D-OVS protocol reads it (layout 3dovs); the rest as detected
