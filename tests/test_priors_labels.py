@@ -89,6 +89,19 @@ def test_label_masks_one_segment_per_class_component_none_on_unlabelled_views(ov
             assert s.class_names[int(np.argmax(text @ f))] == s.class_names[int(t) // L.COMPONENT_STRIDE]
 
 
+def test_unlabelled_views_get_no_semantic_target(ovs_scene):
+    """The trainer's L_sem / L_ds average over `has_target` and are skipped for a view without any
+    (methods/gaussiands, methods/twostage): an unlabelled view must have no target pixel."""
+    from gsbench.methods.semantic import build_targets, fit_autoencoder
+    s = load_scene(ovs_scene)
+    views = [1, 2, 3]
+    p = prepare_priors(s, {"masks": {"provider": "gt"}}, views, (32, 24), None, False, True, True, progress=False)
+    ae, _ = fit_autoencoder(p.mask_features, {"epochs": 2, "hidden": (16,)}, 3, 0)
+    t = build_targets(p.masks, p.mask_features, ae, {v: (32, 24) for v in views})
+    assert not t.has_target[1].any() and not t.has_target[3].any()
+    assert np.array_equal(t.has_target[2].numpy(), p.masks[2] >= 0) and t.has_target[2].any()
+
+
 def test_components_split_one_class_into_two_segments_largest_first():
     cls = np.full((6, 8), -1, np.int32)
     cls[0:2, 0:2] = 1          # 4 px
