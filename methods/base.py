@@ -70,10 +70,11 @@ class Method:
         """Keep the config and resolve the training device and render backend, before any work (so a
         bad device or backend fails at once, not mid-run)."""
         from gsbench.methods.common import resolve_render_backend
-        from gsbench.methods.device import resolve_device
+        from gsbench.methods.device import prepare_backend, resolve_device
         self.config = config
         dev = resolve_device(config)
         self._backend = resolve_render_backend(config, dev)
+        prepare_backend(self._backend)
         return dev
 
     @property
@@ -161,13 +162,15 @@ class Method:
 
     @classmethod
     def load(cls, path: str | Path, device: str | torch.device | None = None) -> "Method":
-        """Load a saved model onto `device` (None = CUDA when available, else the CPU); a saved render
-        backend that cannot run there is re-resolved as `auto` for that device (logged)."""
-        from gsbench.methods.device import resolve_backend_for, resolve_device
-        dev = torch.device(device) if device is not None else resolve_device({"train": {"device": "auto"}})
+        """Load a saved model onto `device` (None = where its render backend runs: the CPU for the cpu
+        backend, else CUDA when available, else the CPU); a saved render backend that cannot run there
+        is re-resolved as `auto` for that device (logged)."""
+        from gsbench.methods.device import prepare_backend, resolve_backend_for, resolve_device
         st = load_torch(Path(path))
         if not isinstance(st, dict) or "field" not in st:
             raise InputError(f"{path}: not a gsbench model file")
+        dev = (torch.device(device) if device is not None
+               else resolve_device({"train": {"device": "auto"}, "backend": st.get("backend", "torch")}))
         from gsbench.methods import get_method
         klass = get_method(st["method"]) if cls is Method else cls
         m = klass()
@@ -189,6 +192,7 @@ class Method:
             m._backend = resolve_backend_for("auto", dev)
             logging.getLogger(__name__).info("%s: saved backend %s cannot render on %s; using %s",
                                              path, saved, dev, m._backend)
+        prepare_backend(m._backend)
         m.info = st.get("info", {})
         return m
 

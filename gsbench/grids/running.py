@@ -140,5 +140,8 @@ def run_grid(grid: Grid, runs_dir: Path, executor: Any, retry_failed: bool = Fal
                                           else " (failed cells skipped; use --retry-failed)"))
     if todo and share_priors:
         shared_priors(todo, executor, log)
+    if todo:    # gsplat's one-time CUDA build here, not in several workers at once
+        from gsbench.methods.device import prebuild_for
+        prebuild_for(pc.config for pc in todo)
     results = executor.map(run_cell, [pc.spec() for pc in todo]) if todo else []
     return GridReport(planned, states, [pc.run_id for pc in todo], list(results))
