@@ -24,6 +24,7 @@ COMMANDS = {
     "report": ("report", "write tables, plots and a static HTML report from collected results"),
     "stress": ("stress", "run the numerical stress battery against float64 references"),
     "points": ("points", "triangulate sparse points from known poses (SIFT + pycolmap) into sparse/0"),
+    "doctor": ("doctor", "check this machine: torch, CUDA devices, gsplat's CUDA extension, numba, what auto picks"),
 }
 LOG_FORMAT = "gsbench: %(message)s"
 DEBUG_LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
