@@ -5,6 +5,8 @@ every shipped preset and grid, `make demo`'s configuration end to end, the execu
 resume across device kinds, and gsplat present without its compiled extension."""
 from __future__ import annotations
 
+import functools
+import json
 import os
 import re
 import sys
@@ -24,6 +26,7 @@ from gsbench.render.gsplat_ext import GsplatStatus
 ROOT = Path(__file__).resolve().parents[1]
 CPU_PRESETS = ("cpu-small", "cpu-medium")     # they pin backend: cpu
 GPU_PRESETS = (None, "paper")                 # backend auto
+REAL_GSPLAT_AVAILABLE = D.gsplat_available
 
 
 @pytest.fixture
@@ -35,8 +38,16 @@ def fake_cuda(monkeypatch):
     monkeypatch.setattr(torch.cuda, "get_device_name", lambda *a: "Fake GPU")
     monkeypatch.setattr(torch.cuda, "get_device_properties",
                         lambda i: SimpleNamespace(name="Fake GPU", total_memory=80 * 2**30, major=9, minor=0))
-    monkeypatch.setattr(D, "gsplat_status", lambda: GsplatStatus(G.READY, "1.5.3", "faked: extension loaded"))
+    monkeypatch.setattr(D, "gsplat_status", lambda: GsplatStatus(G.READY, "1.5.3", "faked: extension loaded"),
+                        raising=False)
+    monkeypatch.setattr(D, "gsplat_available", lambda: True)
     return monkeypatch
+
+
+def _real_gsplat_check(mp) -> None:
+    """Undo the fixture's gsplat shortcut: the real check runs (on the fake package)."""
+    mp.setattr(D, "gsplat_status", G.gsplat_status, raising=False)
+    mp.setattr(D, "gsplat_available", REAL_GSPLAT_AVAILABLE)
 
 
 def _resolve(cfg: dict) -> tuple[str, str]:
@@ -65,7 +76,13 @@ def test_every_shipped_grid_resolves_on_a_cuda_machine(fake_cuda, tmp_path):
     assert "tiny-test" in names and any(n.endswith("-cpu") for n in names)
     for name in names:
         grid = load_grid(name)
-        for cell in grid.cells():
+        seen = set()
+        for cell in grid.cells():     # scenes and seeds do not change the resolution: one cell per config
+            key = json.dumps([cell.method, cell.preset, {k: v for k, v in cell.overrides.items() if k != "seed"}],
+                             sort_keys=True, default=str)
+            if key in seen:
+                continue
+            seen.add(key)
             cfg = cell_config(cell, tmp_path, grid.axis_keys)
             got = _resolve(cfg)        # an InputError here fails the test with the grid's name in the trace
             if name.endswith("-cpu") or name == "tiny-test":
@@ -138,7 +155,7 @@ def fake_gsplat(tmp_path, monkeypatch):
 
 
 def test_gsplat_without_extension_or_toolkit_is_not_picked(fake_cuda, fake_gsplat, caplog):
-    fake_cuda.setattr(D, "gsplat_status", G.gsplat_status)      # the real check, on the fake package
+    _real_gsplat_check(fake_cuda)
     st = G.gsplat_status()
     assert st.state == G.NO_TOOLKIT and st.version == "1.5.3" and not st.usable
     cuda = torch.device("cuda", 0)
@@ -153,7 +170,7 @@ def test_gsplat_without_extension_or_toolkit_is_not_picked(fake_cuda, fake_gspla
 
 
 def test_gsplat_extension_states_are_read_from_files(fake_cuda, fake_gsplat, tmp_path):
-    fake_cuda.setattr(D, "gsplat_status", G.gsplat_status)
+    _real_gsplat_check(fake_cuda)
     fake_cuda.setattr(G, "_nvcc", lambda: "/opt/cuda/bin/nvcc")
     assert G.gsplat_status().state == G.NEEDS_BUILD
     assert D.resolve_backend_for("auto", torch.device("cuda", 0)) == "gsplat"
@@ -167,7 +184,7 @@ def test_gsplat_extension_states_are_read_from_files(fake_cuda, fake_gsplat, tmp
 
 
 def test_a_grid_builds_gsplat_once_before_its_workers_and_only_when_a_cell_uses_it(fake_cuda, fake_gsplat, caplog):
-    fake_cuda.setattr(D, "gsplat_status", G.gsplat_status)
+    _real_gsplat_check(fake_cuda)
     fake_cuda.setattr(G, "_nvcc", lambda: "/opt/cuda/bin/nvcc")
     cpu_cells = [load_config("vanilla", "cpu-small", []), load_config("gaussiands", "cpu-medium", [])]
     assert D.prebuild_for(cpu_cells) is False and sys.gsplat_fake_compiled is False
@@ -187,13 +204,15 @@ def _trainer(tmp_path, backend="cpu"):
 
 def test_resume_of_a_cuda_checkpoint_on_the_cpu_is_one_clear_error(tmp_path):
     st = _trainer(tmp_path).state()
-    assert st["torch_gen"].numel() == 5056 and st["device"] == "cpu" and st["backend"] == "cpu"
-    cuda_st = dict(st, torch_gen=torch.zeros(16, dtype=torch.uint8), device="cuda:0", backend="gsplat")
+    assert st["torch_gen"].numel() == 5056              # a CUDA generator's state is 16 bytes
+    legacy = {k: v for k, v in st.items() if k not in ("device", "backend")}   # checkpoints before the tag
+    legacy["torch_gen"] = torch.zeros(16, dtype=torch.uint8)
+    with pytest.raises(InputError, match="another kind of device"):   # was: RuntimeError RNG state wrong size
+        _trainer(tmp_path).load_state(legacy)
+    cuda_st = dict(legacy, device="cuda:0", backend="gsplat")
     with pytest.raises(InputError, match=r"checkpoint\.pt: written training on cuda:0 with backend gsplat"):
         _trainer(tmp_path).load_state(cuda_st)
-    legacy = {k: v for k, v in cuda_st.items() if k not in ("device", "backend")}   # checkpoints before the tag
-    with pytest.raises(InputError, match="another kind of device"):
-        _trainer(tmp_path).load_state(legacy)
+    assert st["device"] == "cpu" and st["backend"] == "cpu"
     _trainer(tmp_path).load_state(st)                 # the same kind still resumes
 
 
@@ -219,16 +238,15 @@ def test_gpu_slots_keep_the_parents_device_names():
         gpu_slots(2, 2, "3")
 
 
-def _visible_devices(_item) -> str:
-    return os.environ.get("CUDA_VISIBLE_DEVICES", "<unset>")
-
-
+@pytest.mark.slow   # three spawned processes that import torch: ~15 s on 2 cores
 def test_local_executor_workers_get_the_parents_gpus(monkeypatch):
     """Two spawned workers under CUDA_VISIBLE_DEVICES=2,3 get GPUs 2 and 3, not 0 and 1."""
     import gsbench.grids.executors as E
     monkeypatch.setattr(E, "_gpu_count", lambda: 2)
     monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "2,3")
-    got = E.LocalExecutor(jobs=2, progress=False).map(_visible_devices, [0, 1])
+    # os.getenv(name, item): a function the spawned workers import without this test module
+    got = E.LocalExecutor(jobs=2, progress=False).map(functools.partial(os.getenv, "CUDA_VISIBLE_DEVICES"),
+                                                     ["<unset>", "<unset>"])
     assert sorted(got) == ["2", "3"]
 
 
