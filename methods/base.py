@@ -60,6 +60,7 @@ class Method:
         self.providers: dict = {"depth": None, "masks": None, "features": None, "ordering": None}
         self._backend: str = "torch"
         self._feature_provider = None
+        self._background_cache: dict = {}
         self.info: dict = {}
 
     # ------------------------------------------------------------------ protocol
@@ -95,8 +96,13 @@ class Method:
         return self.field
 
     def _background(self) -> torch.Tensor:
+        """train.background on the field's device, made once per device and value (not per render:
+        on CUDA that would be a host-to-device copy inside the FPS timing)."""
         bg = (self.config.get("train", {}) or {}).get("background") or [0.0, 0.0, 0.0]
-        return torch.tensor(bg, dtype=torch.float32, device=self.device)
+        key = (tuple(float(x) for x in bg), self.device)
+        if key not in self._background_cache:
+            self._background_cache[key] = torch.tensor(bg, dtype=torch.float32, device=self.device)
+        return self._background_cache[key]
 
     def render(self, camera: Camera) -> RenderOutput:
         """RGB, depth, alpha and the rendered latent S_hat (features, or None) of a camera."""
@@ -121,8 +127,10 @@ class Method:
 
     def feature_provider(self):
         if self._feature_provider is None:
+            from gsbench.methods.device import resolve_device
             from gsbench.priors import get_feature_provider
-            self._feature_provider = get_feature_provider(self.config["priors"]["features"])
+            dev = self.field.means.device if self.field is not None else resolve_device(self.config)
+            self._feature_provider = get_feature_provider(self.config["priors"]["features"], device=str(dev))
         return self._feature_provider
 
     def embed_text(self, texts: list[str], mode: str = "encode") -> Optional[torch.Tensor]:

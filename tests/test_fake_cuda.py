@@ -278,3 +278,84 @@ def test_doctor_on_a_fake_cuda_machine(fake_cuda, capsys):
     assert "cuda     2 device(s)" in out and "cuda:1  Fake GPU, 80.0 GiB, compute capability 9.0" in out
     assert re.search(r"^  cpu-small .*-> cpu, backend cpu$", out, re.M), out
     assert re.search(r"^  paper .*-> cuda:0, backend gsplat$", out, re.M), out
+
+
+# ---------------------------------------------------------------------------- point 6: the smaller points
+def test_densify_stats_make_no_tensor_from_host_numbers_per_step(monkeypatch):
+    """The (W/2, H/2) scale is built once per image size, not every step (a blocking copy on CUDA)."""
+    from gsbench.methods.densify import DensifyStats
+    stats = DensifyStats(4)
+    made = []
+    real = torch.tensor
+    monkeypatch.setattr(torch, "tensor", lambda *a, **k: made.append(a) or real(*a, **k))
+    g = torch.tensor([[1.0, 0.0], [0.0, 1.0], [3.0, 4.0], [0.0, 0.0]])
+    radii = torch.tensor([[1, 1], [2, 2], [1, 1], [0, 0]])
+    made.clear()
+    for _ in range(3):
+        stats.update(g, radii, 20, 10)
+    assert len(made) == 1
+    # NDC units: (x * W/2, y * H/2) -> norms 10, 5, |(30, 20)| = sqrt(1300); the culled one is not counted
+    assert torch.allclose(stats.grad, torch.tensor([30.0, 15.0, 3 * 1300 ** 0.5, 0.0]))
+    assert torch.equal(stats.count, torch.tensor([3.0, 3.0, 3.0, 0.0]))
+
+
+def test_method_background_is_made_once_per_device(tiny_run):
+    from gsbench.methods import Method
+    m = Method.load(tiny_run / "model.pt")
+    assert m._background() is m._background()
+    assert torch.equal(m._background(), torch.zeros(3))
+
+
+def test_fps_synchronises_the_device_the_model_is_on(fake_cuda):
+    from gsbench.evaluation.image import fps
+    from gsbench.metrics.timing import time_fps
+    synced = []
+    fake_cuda.setattr(torch.cuda, "is_initialized", lambda: True)
+    fake_cuda.setattr(torch.cuda, "synchronize", lambda device=None: synced.append(device))
+    res = time_fps(lambda: None, warmup=1, repeats=3, device=torch.device("cuda", 1))
+    assert synced == [torch.device("cuda", 1)] * 4 and res["sync"] == "torch.cuda.synchronize(cuda:1)"
+    synced.clear()
+    assert time_fps(lambda: None, warmup=1, repeats=2, device="cpu")["sync"] == "none (cpu, synchronous)"
+    assert synced == []                       # a CPU model is not timed against CUDA work
+    method = SimpleNamespace(device=torch.device("cuda", 1), render=lambda cam: None)
+    block = fps(method, ["cam"], {"eval": {"fps_warmup": 0, "fps_repeats": 2}})
+    assert block.timings["fps_sync"] == "torch.cuda.synchronize(cuda:1)" and set(synced) == {torch.device("cuda", 1)}
+
+
+class _Recorder:
+    """Stands in for a prior model class: records the device it was built for."""
+    built: list = []
+
+    def __init__(self, *args, device=None, **kwargs):
+        _Recorder.built.append(device if device is not None else (args[1] if len(args) > 1 else None))
+        self.id = "recorded"
+
+    def predict(self, image, size):
+        return np.ones((size[1], size[0]), np.float32)
+
+
+def test_prior_models_run_on_the_training_device(fake_cuda, tiny_scene, tmp_path):
+    import gsbench.priors.depth as PD
+    import gsbench.priors.features as PF
+    import gsbench.priors.masks as PM
+    from gsbench.datasets import load_scene
+    from gsbench.methods.common import fit_priors
+    from gsbench.priors.pipeline import _compute_masks
+    fake_cuda.setattr(PD, "DepthAnything", _Recorder)
+    fake_cuda.setattr(PM, "Sam2Masks", _Recorder)
+    fake_cuda.setattr(PF, "OpenClipFeatures", _Recorder)
+    _Recorder.built = []
+    scene = load_scene(tiny_scene)
+    model = tmp_path / "depth-model"
+    model.mkdir()
+    cfg = load_config("gaussiands", "cpu-small", ["train.device=cuda:1", "backend=auto",
+                                                 "priors.depth.provider=depth-anything",
+                                                 f"priors.depth.model_path={model}", "train.max_width=16",
+                                                 f"priors.cache_dir={tmp_path / 'cache'}"])
+    fit_priors(scene, cfg, tmp_path / "run", progress=False)
+    PF.get_feature_provider({"provider": "openclip", "checkpoint": "x"}, device="cuda:1")
+    try:
+        _compute_masks(scene, {"provider": "sam2"}, [0], [0], (16, 12), None, False, 0, False, device="cuda:1")
+    except AttributeError:     # the recorder cannot segment; only its device matters here
+        pass
+    assert _Recorder.built == ["cuda:1", "cuda:1", "cuda:1"]
