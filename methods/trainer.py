@@ -17,7 +17,8 @@ Device: the field, Adam state, densification statistics and background live on t
 views' images (methods.device.resolve_device). A step does no host work: loss terms, skip counts
 and a first-non-finite-step flag stay on the device and are read only at log, eval, checkpoint and
 densification steps (the loop's only synchronisation points), so a non-finite loss is reported
-with its exact step at the next such point and no checkpoint is ever written after it.
+with its exact step at the next such point and no checkpoint is ever written after it. (This is
+gsbench's code; gsplat 1.5.3 itself reads its tile-intersection count back once per render.)
 SH colours (N, K, 3) are trained as two Adam groups, the DC band (`train.lr.color`) and the rest
 (`colors_rest`, times `train.lr.color_rest_factor`), with one band more every
 `train.sh_increase_every` steps (3DGS).
