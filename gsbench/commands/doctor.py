@@ -37,10 +37,12 @@ def _torch_lines() -> list[str]:
 
 
 def _gsplat_lines() -> list[str]:
-    from gsbench.render.gsplat_ext import gsplat_status
+    from gsbench.render.gsplat_ext import NEEDS_BUILD, gsplat_status
     st = gsplat_status()
     env = ", ".join(f"{k}={os.environ[k]}" for k in ("MAX_JOBS", "TORCH_CUDA_ARCH_LIST") if k in os.environ)
     lines = [f"gsplat   {st.version or '-'}: {st.state}: {st.detail}"]
+    if st.state == NEEDS_BUILD:
+        lines.append("  `gsbench doctor --build-gsplat` builds it now; training would build it before its first step")
     if env:
         lines.append(f"  build settings: {env}")
     return lines
