@@ -169,11 +169,15 @@ def test_gsplat_without_extension_or_toolkit_is_not_picked(fake_cuda, fake_gspla
     assert sys.gsplat_fake_compiled is False        # nothing was compiled or loaded by the checks
 
 
-def test_gsplat_extension_states_are_read_from_files(fake_cuda, fake_gsplat, tmp_path):
+def test_gsplat_extension_states_are_read_from_files(fake_cuda, fake_gsplat, tmp_path, capsys):
+    from gsbench.cli import main
     _real_gsplat_check(fake_cuda)
     fake_cuda.setattr(G, "_nvcc", lambda: "/opt/cuda/bin/nvcc")
     assert G.gsplat_status().state == G.NEEDS_BUILD
     assert D.resolve_backend_for("auto", torch.device("cuda", 0)) == "gsplat"
+    assert main(["doctor"]) == 0
+    out = capsys.readouterr().out
+    assert "gsplat   1.5.3: needs-build: CUDA extension not built" in out and "--build-gsplat" in out
     build = tmp_path / "ext" / G.EXTENSION
     build.mkdir(parents=True, exist_ok=True)
     (build / f"{G.EXTENSION}.so").write_bytes(b"")
