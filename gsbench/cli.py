@@ -25,6 +25,7 @@ COMMANDS = {
     "stress": ("stress", "run the numerical stress battery against float64 references"),
     "points": ("points", "triangulate sparse points from known poses (SIFT + pycolmap) into sparse/0"),
     "data": ("data", "dataset folders: `data check PATH` lists the layout, labels and every problem"),
+    "doctor": ("doctor", "check this machine: torch, CUDA devices, gsplat's CUDA extension, numba, what auto picks"),
 }
 LOG_FORMAT = "gsbench: %(message)s"
 DEBUG_LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"

@@ -51,11 +51,13 @@ def _fingerprint(scene_path) -> str:
 
 
 def _device(cfg: dict) -> str:
-    """The device training uses, for the memory counters (train.device where the config has it)."""
-    dev = str(cfg.get("train", {}).get("device") or "auto")
-    if dev == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    return dev
+    """The device training uses, for the memory counters (methods.device.resolve_device). A config
+    it refuses gets "cpu" here: fit() raises the same error next and records it in status.json."""
+    from gsbench.methods.device import resolve_device
+    try:
+        return str(resolve_device(cfg))
+    except InputError:
+        return "cpu"
 
 
 def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: bool = True) -> Path:

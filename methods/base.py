@@ -60,6 +60,7 @@ class Method:
         self.providers: dict = {"depth": None, "masks": None, "features": None, "ordering": None}
         self._backend: str = "torch"
         self._feature_provider = None
+        self._background_cache: dict = {}
         self.info: dict = {}
 
     # ------------------------------------------------------------------ protocol
@@ -70,10 +71,11 @@ class Method:
         """Keep the config and resolve the training device and render backend, before any work (so a
         bad device or backend fails at once, not mid-run)."""
         from gsbench.methods.common import resolve_render_backend
-        from gsbench.methods.device import resolve_device
+        from gsbench.methods.device import prepare_backend, resolve_device
         self.config = config
         dev = resolve_device(config)
         self._backend = resolve_render_backend(config, dev)
+        prepare_backend(self._backend)
         return dev
 
     @property
@@ -94,8 +96,13 @@ class Method:
         return self.field
 
     def _background(self) -> torch.Tensor:
+        """train.background on the field's device, made once per device and value (not per render:
+        on CUDA that would be a host-to-device copy inside the FPS timing)."""
         bg = (self.config.get("train", {}) or {}).get("background") or [0.0, 0.0, 0.0]
-        return torch.tensor(bg, dtype=torch.float32, device=self.device)
+        key = (tuple(float(x) for x in bg), self.device)
+        if key not in self._background_cache:
+            self._background_cache[key] = torch.tensor(bg, dtype=torch.float32, device=self.device)
+        return self._background_cache[key]
 
     def render(self, camera: Camera) -> RenderOutput:
         """RGB, depth, alpha and the rendered latent S_hat (features, or None) of a camera."""
@@ -120,8 +127,10 @@ class Method:
 
     def feature_provider(self):
         if self._feature_provider is None:
+            from gsbench.methods.device import resolve_device
             from gsbench.priors import get_feature_provider
-            self._feature_provider = get_feature_provider(self.config["priors"]["features"])
+            dev = self.field.means.device if self.field is not None else resolve_device(self.config)
+            self._feature_provider = get_feature_provider(self.config["priors"]["features"], device=str(dev))
         return self._feature_provider
 
     def embed_text(self, texts: list[str], mode: str = "encode") -> Optional[torch.Tensor]:
@@ -161,13 +170,15 @@ class Method:
 
     @classmethod
     def load(cls, path: str | Path, device: str | torch.device | None = None) -> "Method":
-        """Load a saved model onto `device` (None = CUDA when available, else the CPU); a saved render
-        backend that cannot run there is re-resolved as `auto` for that device (logged)."""
-        from gsbench.methods.device import resolve_backend_for, resolve_device
-        dev = torch.device(device) if device is not None else resolve_device({"train": {"device": "auto"}})
+        """Load a saved model onto `device` (None = where its render backend runs: the CPU for the cpu
+        backend, else CUDA when available, else the CPU); a saved render backend that cannot run there
+        is re-resolved as `auto` for that device (logged)."""
+        from gsbench.methods.device import prepare_backend, resolve_backend_for, resolve_device
         st = load_torch(Path(path))
         if not isinstance(st, dict) or "field" not in st:
             raise InputError(f"{path}: not a gsbench model file")
+        dev = (torch.device(device) if device is not None
+               else resolve_device({"train": {"device": "auto"}, "backend": st.get("backend", "torch")}))
         from gsbench.methods import get_method
         klass = get_method(st["method"]) if cls is Method else cls
         m = klass()
@@ -189,6 +200,7 @@ class Method:
             m._backend = resolve_backend_for("auto", dev)
             logging.getLogger(__name__).info("%s: saved backend %s cannot render on %s; using %s",
                                              path, saved, dev, m._backend)
+        prepare_backend(m._backend)
         m.info = st.get("info", {})
         return m
 

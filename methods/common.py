@@ -33,6 +33,7 @@ def cache_dir_for(config: dict, run_dir: Path) -> Path:
 def fit_priors(scene, config: dict, run_dir: Path, *, progress: bool):
     """The priors of fit(): computed from the registry's priors request, the same dict a grid builds
     to share priors between cells, so the two cannot ask for different cache entries."""
+    from gsbench.methods.device import resolve_device
     from gsbench.methods.registry import build_priors_request
     from gsbench.priors import prepare_priors
     req = build_priors_request(config, scene)
@@ -40,7 +41,8 @@ def fit_priors(scene, config: dict, run_dir: Path, *, progress: bool):
         raise InputError(f"{scene.path}: the scene has no training views")
     return prepare_priors(scene, req["priors"], req["view_ids"], tuple(req["size"]), cache_dir_for(config, run_dir),
                           need_depth=req["need_depth"], need_masks=req["need_sem"], need_features=req["need_sem"],
-                          per_frame_masks=req["per_frame"], seed=req["seed"], progress=progress)
+                          per_frame_masks=req["per_frame"], seed=req["seed"], progress=progress,
+                          device=str(resolve_device(config)))
 
 
 def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Callable[[GaussianField], dict]]:

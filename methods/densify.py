@@ -82,6 +82,7 @@ class DensifyStats:
         self.grad = torch.zeros(n, device=device)
         self.count = torch.zeros(n, device=device)
         self.max_radii = torch.zeros(n, device=device)
+        self._scales: dict = {}      # (W, H, dtype, device) -> the (W/2, H/2) tensor of _ndc_scale
 
     def update(self, means2d_grad: torch.Tensor | None, radii: torch.Tensor, width: int, height: int) -> None:
         # masked updates (torch.where), not boolean indexing: no host synchronisation on CUDA
@@ -91,11 +92,18 @@ class DensifyStats:
         if means2d_grad is None:
             return
         g = means2d_grad.detach()
-        scale = torch.tensor([width / 2.0, height / 2.0], dtype=g.dtype, device=g.device)
-        norm = (g * scale).norm(dim=-1).to(self.grad)
+        norm = (g * self._ndc_scale(width, height, g)).norm(dim=-1).to(self.grad)
         visf = vis.to(self.grad)
         self.grad = self.grad + torch.where(vis, norm, torch.zeros_like(norm))
         self.count = self.count + visf
+
+    def _ndc_scale(self, width: int, height: int, like: torch.Tensor) -> torch.Tensor:
+        """(W/2, H/2) on the gradient's device, made once per image size: building it from Python
+        numbers every step would be a blocking host-to-device copy on CUDA."""
+        key = (int(width), int(height), like.dtype, like.device)
+        if key not in self._scales:
+            self._scales[key] = torch.tensor([width / 2.0, height / 2.0], dtype=like.dtype, device=like.device)
+        return self._scales[key]
 
     def keep(self, mask: torch.Tensor) -> None:
         self.grad, self.count, self.max_radii = self.grad[mask], self.count[mask], self.max_radii[mask]

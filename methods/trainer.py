@@ -17,7 +17,8 @@ Device: the field, Adam state, densification statistics and background live on t
 views' images (methods.device.resolve_device). A step does no host work: loss terms, skip counts
 and a first-non-finite-step flag stay on the device and are read only at log, eval, checkpoint and
 densification steps (the loop's only synchronisation points), so a non-finite loss is reported
-with its exact step at the next such point and no checkpoint is ever written after it.
+with its exact step at the next such point and no checkpoint is ever written after it. (This is
+gsbench's code; gsplat 1.5.3 itself reads its tile-intersection count back once per render.)
 SH colours (N, K, 3) are trained as two Adam groups, the DC band (`train.lr.color`) and the rest
 (`colors_rest`, times `train.lr.color_rest_factor`), with one band more every
 `train.sh_increase_every` steps (3DGS).
@@ -196,11 +197,29 @@ class Trainer:
                 "optimizer": self.ps.optimizer.state_dict(), "densify": self.stats.state_dict(),
                 "view_rng": self.view_rng.bit_generator.state, "view_stack": list(self.view_stack),
                 "torch_gen": self.torch_gen.get_state(), "torch_rng": torch.get_rng_state(),
+                "device": str(self.device), "backend": self.backend,
                 "extra": self.extra_state() if self.extra_state else {}}
+
+    def _check_resumable(self, st: dict) -> None:
+        """A checkpoint resumes only on the device kind and render backend that wrote it: the split
+        generator's state is device-specific (5,056 bytes on the CPU, 16 on CUDA), and a run half
+        rendered by one backend and half by another would be recorded as the second's. A grid started
+        on one kind of machine and resumed on the other gets this error for its cell, not a crash."""
+        dev, backend = st.get("device"), st.get("backend")
+        gen = st.get("torch_gen")
+        own = self.torch_gen.get_state()
+        size_differs = torch.is_tensor(gen) and gen.numel() != own.numel()   # checkpoints without "device"
+        if ((dev is not None and torch.device(dev).type != self.device.type) or size_differs
+                or (backend is not None and backend != self.backend)):
+            was = f"{dev or 'another kind of device'}" + (f" with backend {backend}" if backend else "")
+            raise InputError(f"{self.run_dir / CHECKPOINT}: written training on {was}; this run resolves to "
+                             f"{self.device} with backend {self.backend} here. Resume it on the kind of machine that "
+                             f"started it, or delete the checkpoint to train this run from step 0")
 
     def load_state(self, st: dict) -> None:
         if st.get("phase") != self.phase:
             raise ValueError(f"checkpoint phase {st.get('phase')!r} != {self.phase!r}")
+        self._check_resumable(st)
         lrs = {g["name"]: g["lr"] for g in self.ps.optimizer.param_groups}
         trainable = {g["name"] for g in self.ps.optimizer.param_groups}
         self.ps = ParamSet({k: v.to(self.device) for k, v in st["params"].items()},

@@ -1,9 +1,10 @@
 """FPS timer: warm-up calls, device synchronisation around every timed call, median.
 
 The median (not the mean) is robust to the occasional scheduler hiccup on shared machines.
-`sync=None` picks the synchronisation automatically: `torch.cuda.synchronize` when CUDA is
-initialised (asynchronous kernels would otherwise be timed at launch), else none (CPU work is
-synchronous). A callable is used as given and recorded by its name.
+`sync=None` picks the synchronisation automatically: with `device` given, `torch.cuda.synchronize(device)`
+for a CUDA device (asynchronous kernels would otherwise be timed at launch; the device the work runs
+on, not the current one) and none for the CPU (synchronous); without it, `torch.cuda.synchronize()`
+when CUDA is initialised, else none. A callable is used as given and recorded by its name.
 """
 from __future__ import annotations
 
@@ -14,9 +15,14 @@ from typing import Any, Callable
 FPS_IMPL = "fps/median-after-warmup/v1"
 
 
-def _auto_sync() -> tuple[Callable[[], None] | None, str]:
+def _auto_sync(device: Any = None) -> tuple[Callable[[], None] | None, str]:
     try:
         import torch
+        if device is not None:
+            dev = torch.device(device)
+            if dev.type == "cuda":
+                return (lambda: torch.cuda.synchronize(dev)), f"torch.cuda.synchronize({dev})"
+            return None, f"none ({dev.type}, synchronous)"
         if torch.cuda.is_available() and torch.cuda.is_initialized():
             return torch.cuda.synchronize, "torch.cuda.synchronize"
     except ImportError:  # pragma: no cover
@@ -25,12 +31,13 @@ def _auto_sync() -> tuple[Callable[[], None] | None, str]:
 
 
 def time_fps(fn: Callable[[], Any], warmup: int = 3, repeats: int = 10,
-             sync: Callable[[], None] | None = None) -> dict:
-    """Time `fn()`; returns {"median_ms", "fps", "times_ms", "warmup", "repeats", "sync", "impl"}."""
+             sync: Callable[[], None] | None = None, device: Any = None) -> dict:
+    """Time `fn()` (its work on `device` when given); returns {"median_ms", "fps", "times_ms", "warmup",
+    "repeats", "sync", "impl"}."""
     if warmup < 0 or repeats < 1:
         raise ValueError(f"need warmup >= 0 and repeats >= 1, got {warmup}, {repeats}")
     if sync is None:
-        sync_fn, sync_name = _auto_sync()
+        sync_fn, sync_name = _auto_sync(device)
     else:
         sync_fn, sync_name = sync, getattr(sync, "__qualname__", None) or repr(sync)
     for _ in range(warmup):

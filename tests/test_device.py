@@ -58,6 +58,12 @@ def test_cli_train_device_cuda_without_cuda_is_one_line_error(tmp_path, capsys):
     assert len(errors) == 1 and "CUDA is not available" in errors[0], err
 
 
+def device_run_overrides(dev: str) -> list[str]:
+    """The end-to-end run below on `dev`: cpu-small pins backend cpu, so the cuda run asks for auto (gsplat)."""
+    backend = ["backend=auto"] if dev == "cuda" else []
+    return [f"train.device={dev}", *backend, "train.iterations=300", "train.max_width=64"]
+
+
 @pytest.mark.cuda
 @pytest.mark.skipif(NO_CUDA, reason="needs a CUDA device")
 def test_cpu_and_cuda_runs_reach_similar_psnr(tmp_path):
@@ -69,7 +75,7 @@ def test_cpu_and_cuda_runs_reach_similar_psnr(tmp_path):
     scene = make_scene("tabletop-small", tmp_path / "s", seed=0, views=10, resolution=(64, 48))
     ps = {}
     for dev in ("cpu", "cuda"):
-        cfg = load_config("vanilla", "cpu-small", [f"train.device={dev}", "train.iterations=300", "train.max_width=64"])
+        cfg = load_config("vanilla", "cpu-small", device_run_overrides(dev))
         run = train_run(cfg, scene, tmp_path / dev, progress=False)
         s = read_json(run / "train_summary.json")
         assert s["info"]["device"].startswith(dev)

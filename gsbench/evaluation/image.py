@@ -86,7 +86,8 @@ def fps(method, cams: list, config: dict) -> Block:
         method.render(cams[state["k"] % len(cams)])
         state["k"] += 1
 
-    res = timing.time_fps(render_next, warmup=int(ev.get("fps_warmup", 3)), repeats=int(ev.get("fps_repeats", 10)))
+    res = timing.time_fps(render_next, warmup=int(ev.get("fps_warmup", 3)), repeats=int(ev.get("fps_repeats", 10)),
+                          device=getattr(method, "device", None))
     out.put("fps", res["fps"], res["impl"], "timer returned no value")
     out.timings.update(render_ms=res["median_ms"], fps=res["fps"], fps_sync=res["sync"])
     return out

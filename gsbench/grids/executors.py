@@ -6,7 +6,9 @@ The grid code only calls `executor.map(fn, items)`; it does not know which execu
   fresh worker process for every cell (max_tasks_per_child=1), so no cell inherits the memory peak,
   caches or torch state of an earlier one; each worker uses max(1, cores // jobs) torch threads so
   `--jobs N` never oversubscribes the machine. On a CUDA machine each worker takes a GPU from a pool
-  of `jobs` slots (slot k on GPU k % n_gpus) and gives it back when it exits.
+  of `jobs` slots (slot k on the (k % n)-th GPU this process sees) and gives it back when it exits.
+  A worker's CUDA_VISIBLE_DEVICES is that GPU's entry of the parent's own list (an index or a UUID),
+  so under CUDA_VISIBLE_DEVICES=2,3 the workers use GPUs 2 and 3, not 0 and 1.
 - `SerialExecutor()`: in this process, one cell after another (debugging).
 - `SubmititExecutor(folder, cluster)`: submitit job arrays (`map_array`). cluster="slurm" submits
   to SLURM, cluster="local" runs each job as a local subprocess (used in the tests), "debug" runs
@@ -94,11 +96,11 @@ class LocalExecutor:
             return []
         ctx = get_context("spawn")
         gpu_queue = None
-        n_gpus = _gpu_count()
-        if n_gpus > 0:
+        slots = gpu_slots(self.jobs, _gpu_count(), os.environ.get("CUDA_VISIBLE_DEVICES"))
+        if slots:
             gpu_queue = ctx.Manager().Queue()
-            for k in range(self.jobs):
-                gpu_queue.put(k % n_gpus)
+            for gpu in slots:
+                gpu_queue.put(gpu)
         results: list[Any] = [None] * len(items)
         with ProcessPoolExecutor(max_workers=min(self.jobs, len(items)), mp_context=ctx, max_tasks_per_child=1,
                                  initializer=_init_worker, initargs=(self.threads, gpu_queue)) as pool:
@@ -109,6 +111,22 @@ class LocalExecutor:
                 bar.update(1)
             bar.close()
         return results
+
+
+def gpu_slots(jobs: int, n_gpus: int, visible: Optional[str]) -> list[str]:
+    """The CUDA_VISIBLE_DEVICES value of each of `jobs` worker slots: slot k gets the (k % n)-th GPU
+    this process sees, named as the parent's CUDA_VISIBLE_DEVICES names it (index, GPU-/MIG- UUID);
+    without that variable the GPUs are 0..n-1. [] when there is no GPU."""
+    if n_gpus <= 0:
+        return []
+    if visible is None:
+        names = [str(i) for i in range(n_gpus)]
+    else:   # CUDA reads the list up to its first invalid entry, so torch's count is a prefix of it
+        names = [e.strip() for e in visible.split(",") if e.strip()][:n_gpus]
+        if len(names) < n_gpus:
+            raise InputError(f"CUDA_VISIBLE_DEVICES={visible!r} names {len(names)} device(s) but torch sees "
+                             f"{n_gpus}; cannot tell which GPU each worker should use")
+    return [names[k % n_gpus] for k in range(jobs)]
 
 
 def _gpu_count() -> int:

@@ -28,10 +28,20 @@ def prepare_priors_job(request: dict) -> dict:
         pri = prepare_priors(scene, request["priors"], request["view_ids"], tuple(request["size"]),
                              Path(request["priors"]["cache_dir"]), need_depth=request["need_depth"],
                              need_masks=request["need_sem"], need_features=request["need_sem"],
-                             per_frame_masks=request["per_frame"], seed=request["seed"], progress=False)
+                             per_frame_masks=request["per_frame"], seed=request["seed"], progress=False,
+                             device=request.get("device"))
         return {"ok": True, "seconds": time.time() - t0, "providers": dict(pri.providers)}
     except Exception as e:  # the cells then compute their own priors; the grid says so
         return {"ok": False, "seconds": time.time() - t0, "error": f"{type(e).__name__}: {e}"}
+
+
+def _training_device(config: dict) -> Optional[str]:
+    from gsbench.errors import InputError
+    from gsbench.methods.device import resolve_device
+    try:
+        return str(resolve_device(config))
+    except InputError:      # the cell fails with this error when it runs
+        return None
 
 
 def shared_priors(todo: list[PlannedCell], executor: Any, log: Callable[[str], None]) -> dict:
@@ -40,8 +50,9 @@ def shared_priors(todo: list[PlannedCell], executor: Any, log: Callable[[str], N
     groups: dict[str, list[dict]] = {}
     for pc in todo:
         req = priors_request(pc.spec())
-        if req is not None:
-            groups.setdefault(json.dumps(req, sort_keys=True, default=str), []).append(req)
+        if req is not None:   # prior models run on the cell's training device (not part of what is shared)
+            groups.setdefault(json.dumps(req, sort_keys=True, default=str), []).append(
+                dict(req, device=_training_device(pc.config)))
     shared = [reqs[0] for reqs in groups.values() if len(reqs) > 1]
     if not shared:
         return {"groups": 0}

@@ -138,6 +138,9 @@ def run_grid(grid: Grid, runs_dir: Path, executor: Any, retry_failed: bool = Fal
     log(f"grid {grid.name}: {len(planned)} cells; " + ", ".join(f"{k} {v}" for k, v in counts.items() if v)
         + f"; dispatching {len(todo)}" + ("" if retry_failed or not counts["failed"]
                                           else " (failed cells skipped; use --retry-failed)"))
+    if todo:    # gsplat's one-time CUDA build here, not in several workers at once
+        from gsbench.methods.device import prebuild_for
+        prebuild_for(pc.config for pc in todo)
     if todo and share_priors:
         shared_priors(todo, executor, log)
     results = executor.map(run_cell, [pc.spec() for pc in todo]) if todo else []

@@ -174,8 +174,9 @@ def depth_provider_id(depth_cfg: Mapping) -> str | None:
 
 
 def compute_depth(scene, depth_cfg: Mapping, view_ids: Sequence[int], size: tuple[int, int],
-                  seed: int = 0, progress: bool = False) -> dict[int, DepthPrior]:
-    """Clean depth priors for `view_ids` at `size` (no noise; see `apply_depth_noise`)."""
+                  seed: int = 0, progress: bool = False, device: str | None = None) -> dict[int, DepthPrior]:
+    """Clean depth priors for `view_ids` at `size` (no noise; see `apply_depth_noise`); a depth model
+    runs on `device` (the run's training device; None = CUDA when available, else the CPU)."""
     p = depth_cfg.get("provider", "gt")
     pid = depth_provider_id(depth_cfg)
     out: dict[int, DepthPrior] = {}
@@ -196,7 +197,7 @@ def compute_depth(scene, depth_cfg: Mapping, view_ids: Sequence[int], size: tupl
             vals, valid = sparse_depth_prior(scene.points, W.camera_at(scene.cameras[v], size))
             out[v] = DepthPrior(vals, valid, "depth", pid)
     elif p == "depth-anything":
-        model = DepthAnything(depth_cfg.get("model_path"))
+        model = DepthAnything(depth_cfg.get("model_path"), device)
         for v in bar(view_ids):
             vals = model.predict(scene.image(v), size)
             out[v] = DepthPrior(vals, np.isfinite(vals), "disparity", model.id)

@@ -196,7 +196,8 @@ class OpenClipFeatures(FeatureProvider):
     version = 1
     needs_image = True
 
-    def __init__(self, checkpoint: str | None, model: str = "ViT-B-16", batch_size: int = 32):
+    def __init__(self, checkpoint: str | None, model: str = "ViT-B-16", batch_size: int = 32,
+                 device: str | None = None):
         require_weights("priors.features.checkpoint", checkpoint, "OpenCLIP ViT-B/16",
                         "priors.features.provider=openclip")
         try:
@@ -205,7 +206,7 @@ class OpenClipFeatures(FeatureProvider):
         except ImportError as e:
             raise InputError(f"priors.features.provider=openclip needs the `models` extra "
                              f"(pip install -e .[models]): {e}") from None
-        self.device = "cuda" if torch.cuda.is_available() else "cpu"
+        self.device = device or ("cuda" if torch.cuda.is_available() else "cpu")
         try:
             self.model, _, self.preprocess = open_clip.create_model_and_transforms(
                 model, pretrained=str(checkpoint), device=self.device)
@@ -261,15 +262,17 @@ class OpenClipFeatures(FeatureProvider):
 _PROVIDERS: dict[tuple, FeatureProvider] = {}
 
 
-def get_feature_provider(features_cfg: Mapping) -> FeatureProvider:
-    """The feature provider of the `priors.features` config (models are loaded once per process)."""
+def get_feature_provider(features_cfg: Mapping, device: str | None = None) -> FeatureProvider:
+    """The feature provider of the `priors.features` config; a model is loaded once per process and
+    device, on `device` (None = CUDA when available, else the CPU)."""
     name = features_cfg.get("provider", "text-aligned")
     if name == "text-aligned":
         return TextAlignedFeatures(features_cfg.get("noise", 0.4), features_cfg.get("context", 0.15))
     if name == "openclip":
-        key = ("openclip", features_cfg.get("checkpoint"), features_cfg.get("model", "ViT-B-16"))
+        key = ("openclip", features_cfg.get("checkpoint"), features_cfg.get("model", "ViT-B-16"), device)
         if key not in _PROVIDERS:
-            _PROVIDERS[key] = OpenClipFeatures(features_cfg.get("checkpoint"), features_cfg.get("model", "ViT-B-16"))
+            _PROVIDERS[key] = OpenClipFeatures(features_cfg.get("checkpoint"), features_cfg.get("model", "ViT-B-16"),
+                                               device=device)
         return _PROVIDERS[key]
     raise InputError(f"priors.features.provider: unknown provider {name!r} "
                      f"(expected one of {', '.join(FEATURE_PROVIDERS)})")

@@ -121,10 +121,10 @@ def _mask_provider_id(masks_cfg: Mapping, per_frame: bool, scene=None) -> str:
 
 
 def _compute_masks(scene, masks_cfg: Mapping, views, order, size, images: _Images, per_frame: bool,
-                   seed: int, progress: bool) -> tuple[dict[int, np.ndarray], str]:
+                   seed: int, progress: bool, device: str | None = None) -> tuple[dict[int, np.ndarray], str]:
     p = masks_cfg.get("provider", "simulated")
     if p == "sam2":
-        sam = M.Sam2Masks(masks_cfg)
+        sam = M.Sam2Masks(masks_cfg, device=device)
         imgs = images.all(order)
         if per_frame:
             return sam.per_frame(views, imgs, progress), sam.id + "+per-frame"
@@ -164,8 +164,11 @@ def _compute_masks(scene, masks_cfg: Mapping, views, order, size, images: _Image
 
 def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tuple[int, int],
                    cache_dir: Path | None, need_depth: bool, need_masks: bool, need_features: bool,
-                   per_frame_masks: bool = False, seed: int = 0, progress: bool = True) -> Priors:
+                   per_frame_masks: bool = False, seed: int = 0, progress: bool = True,
+                   device: str | None = None) -> Priors:
     """Order the views, then compute (or load from the cache) the depth, mask and feature priors.
+    Prior models (Depth Anything, SAM2, OpenCLIP) run on `device`, the run's training device (None =
+    CUDA when available, else the CPU); the priors themselves are host arrays.
 
     `image_size` is the training resolution (W, H); every prior is at that size. Features need
     masks, so `need_features` computes masks too. `per_frame_masks=True` gives unpropagated
@@ -221,7 +224,7 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
                 depth = {v: D.DepthPrior(arrays[f"values_{v}"], arrays[f"valid_{v}"].astype(bool),
                                          meta["kind"], meta["provider"]) for v in views}
             else:
-                depth = D.compute_depth(scene, dcfg, views, size, seed, progress)
+                depth = D.compute_depth(scene, dcfg, views, size, seed, progress, device=device)
                 kinds = {p.kind for p in depth.values()}
                 arrays = {}
                 for v, p in depth.items():
@@ -262,7 +265,8 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
             masks = {v: arrays[f"m_{v}"].astype(np.int32) for v in views}
             mid = meta["provider"]
         else:
-            masks, mid = _compute_masks(scene, mcfg, views, order, size, images, bool(per_frame_masks), seed, progress)
+            masks, mid = _compute_masks(scene, mcfg, views, order, size, images, bool(per_frame_masks), seed, progress,
+                                        device=device)
             cache.save("masks", mkey, {f"m_{v}": masks[v] for v in views}, {"provider": mid})
         cache_info["masks"] = {"key": mkey, "hit": hit is not None}
         providers["masks"] = mid
@@ -299,7 +303,7 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
     mask_features = None
     fprov = None
     if need_features:
-        fprov = get_feature_provider(dict(cfg.get("features", {}) or {}))
+        fprov = get_feature_provider(dict(cfg.get("features", {}) or {}), device=device)
         fparams = dict(fprov.cache_params())
         fparams["seed"] = seed
         if (cfg.get("features", {}) or {}).get("provider") == "openclip":
