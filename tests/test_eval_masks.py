@@ -145,7 +145,7 @@ def test_bad_inputs_name_the_problem(tmp_path):
         score_mask_folder(tmp_path / "nope", layout, "3dovs")
     with pytest.raises(InputError, match="classes.txt"):
         score_mask_folder(tmp_path / "pred", tmp_path / "pred", "3dovs")
-    with pytest.raises(InputError, match="no LERF-OVS label files"):
+    with pytest.raises(InputError, match=r"holds no frame_\*.json label files; LERF-OVS label files usually"):
         score_mask_folder(tmp_path / "pred", layout, "lerf")
     bad = tmp_path / "pred" / "0.png"
     cv2.imwrite(str(bad), np.full((8, 10), 7, np.uint8))
