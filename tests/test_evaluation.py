@@ -327,7 +327,8 @@ def test_3dovs_scored_at_the_reference_size_on_a_real_capture(tmp_path_factory):
     assert (c.width, c.height) == (64, 48)
     b = score_3dovs(_RandomSemantics(), real, [i], cfg, "encode", "encode", "reference")
     assert b.resolution["3dovs/reference"] == "16x12"
-    assert b.notes["3dovs_size"] == "1/8 of the 128x96 images (real capture: the 3D-OVS reference's --downsample_test 8)"
+    assert b.notes["3dovs_size"] == ("1/8 of the 128x96 images "
+                                     "(real capture: the 3D-OVS reference's --downsample_test 8)")
     assert "+size-1/8+query-encode" in b.metric_impl["miou_3dovs"]
     g = score_3dovs(_RandomSemantics(), gen, [i], cfg, "encode", "encode", "reference")
     assert g.resolution["3dovs/reference"] == "128x96" and "+size-1/1" in g.metric_impl["miou_3dovs"]
