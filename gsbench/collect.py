@@ -274,7 +274,9 @@ def collect(runs_dir: str | Path) -> pd.DataFrame:
     """Read every results.json under runs_dir into the long table (no file written).
 
     Runs found twice (same run_id in two folders, e.g. a copied run) are kept once, the first in
-    path order; the duplicates are listed in `df.attrs["warnings"]`.
+    path order; the duplicates are listed in `df.attrs["warnings"]`. A results.json that cannot be
+    read (truncated, not the schema) becomes one failed row with the error as its reason and is
+    listed in `df.attrs["unreadable"]`; when no file can be read at all, that is an InputError.
     """
     runs_dir = Path(runs_dir)
     paths = find_results(runs_dir)
@@ -299,6 +301,9 @@ def collect(runs_dir: str | Path) -> pd.DataFrame:
             rows.append(_unreadable_row(p, str(e)))
         if run_id is not None:
             seen[run_id] = p
+    if unreadable and len(unreadable) == len(paths):
+        more = f" (and {len(unreadable) - 1} more)" if len(unreadable) > 1 else ""
+        raise InputError(f"{runs_dir}: no results.json could be read: {unreadable[0]}{more}")
     df = pd.DataFrame(rows)
     for c in BASE_COLUMNS + TAIL_COLUMNS:
         if c not in df.columns:

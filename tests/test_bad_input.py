@@ -154,15 +154,13 @@ def test_corrupt_transforms_json(scene, tmp_path, capsys):
 
 
 def test_truncated_results_json_in_collect(trained_run, tmp_path, capsys):
-    """The run becomes a failed row; the file is named on stderr (tests/test_untrusted_files.py: many runs)."""
     runs = tmp_path / "runs"
     shutil.copytree(trained_run, runs / "r1")
     p = runs / "r1" / "results.json"
     p.write_text(json.dumps({"run_id": "x", "metrics": {"psnr": 20.0}, "status": "done"})[:30])
-    assert main(["collect", str(runs)]) == 0
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    assert f"could not read {p}: corrupt or truncated JSON" in err and "could not read 1 results.json" in err
+    code, msg = cli_error(capsys, ["collect", str(runs)])
+    assert code == 1
+    assert str(p) in msg and "corrupt or truncated JSON" in msg
 
 
 # ------------------------------------------------------------------------------------ checkpoints

@@ -105,14 +105,16 @@ def test_bad_results_name_the_file(tmp_path: Path):
     """A bad results.json becomes one failed row whose reason names the file and the problem."""
     root = tmp_path / "runs"
     d = write_run(root, "a", method="gaussiands", scene="bench", metrics={"psnr": 20.0})
+    write_run(root, "b", method="vanilla", scene="bench", metrics={"psnr": 21.0})
     res = json.loads((d / "results.json").read_text())
 
     def reason_of(text: str) -> str:
         (d / "results.json").write_text(text)
         df = collect(root)
-        assert len(df) == 1 and df.iloc[0]["status"] == "failed" and math.isnan(df.iloc[0]["value"])
-        assert len(df.attrs["unreadable"]) == 1
-        return df.iloc[0]["reason"]
+        bad = df[df["run_dir"] == str(d)]
+        assert len(bad) == 1 and bad.iloc[0]["status"] == "failed" and math.isnan(bad.iloc[0]["value"])
+        assert len(df.attrs["unreadable"]) == 1 and df[df["metric"] == "psnr"]["value"].tolist() == [21.0]
+        return bad.iloc[0]["reason"]
 
     del res["scene"]
     assert "a/results.json: missing key 'scene'" in reason_of(json.dumps(res))
@@ -120,6 +122,9 @@ def test_bad_results_name_the_file(tmp_path: Path):
     res["metrics"]["psnr"] = "high"
     assert "results.json: metrics.psnr must be a number" in reason_of(json.dumps(res))
     assert "a/results.json: corrupt or truncated JSON" in reason_of('{"run_id": "x", ')
+    (root / "b" / "results.json").write_text("{")              # nothing readable at all: an error
+    with pytest.raises(InputError, match=r"no results.json could be read: .*corrupt or truncated JSON.* 1 more"):
+        collect(root)
 
 
 def test_empty_dir_duplicates_and_hidden(tmp_path: Path):
