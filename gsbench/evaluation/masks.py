@@ -157,7 +157,8 @@ def score_3dovs_folder(pred_dir: Path, layout_dir: Path, ratio: float) -> tuple[
         pred_files, label_map, src = None, None, None
         for s in stems:
             if (pred_dir / s).is_dir():
-                pred_files = {c: pred_dir / s / f"{c}.png" for c in classes}
+                src = pred_dir / s
+                pred_files = {c: src / f"{c}.png" for c in classes}
                 break
             if (pred_dir / f"{s}.png").exists():
                 src = pred_dir / f"{s}.png"
@@ -184,7 +185,7 @@ def score_3dovs_folder(pred_dir: Path, layout_dir: Path, ratio: float) -> tuple[
             raise InputError(f"{pred_dir / stems[0]}: prediction masks of one view differ in size {sorted(shapes)}")
         gh, gw = next(iter(gt.values())).shape
         ph, pw = shapes.pop() if shapes else (gh, gw)
-        check_aspect(src or pred_dir / stems[0], pw, ph, gw, gh, f"the GT masks of view {vd.name}")
+        check_aspect(src, pw, ph, gw, gh, f"the GT masks of view {vd.name}")
         sizes.add(f"{pw}x{ph}")
         stack = np.stack([resize_nearest(gt[c], pw, ph) for c in classes])
         ious, bious = [], []
