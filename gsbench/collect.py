@@ -234,6 +234,32 @@ def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
     return rows
 
 
+def _unreadable_row(path: Path, error: str) -> dict:
+    """The row of a run whose results.json cannot be read: status "failed", the error as reason.
+
+    Identity comes from the run's config.json when that one is readable, else from the folder name."""
+    config: Any = {}
+    try:
+        if (path.parent / "config.json").exists():
+            config = read_json(path.parent / "config.json")
+    except InputError:
+        pass
+    config = config if isinstance(config, dict) else {}
+    scene = config.get("scene")
+    seed = config.get("seed")
+    return {
+        "run_id": str(config.get("run_id") or path.parent.name), "run_dir": str(path.parent),
+        "study": config.get("study"), "method": config.get("method"),
+        "scene": scene.get("name") if isinstance(scene, dict) else None,
+        "seed": seed if isinstance(seed, int) and not isinstance(seed, bool) else None,
+        "status": "failed", "protocol": None, "protocols": "", "backend": config.get("backend"),
+        "provider.depth": None, "provider.masks": None, "provider.features": None,
+        "dropped": dropped_text(config.get("dropped")), "config_key": config_key(config or None),
+        "metric": None, "value": math.nan, "metric_impl": None, "source": None,
+        "reason": f"results.json unreadable: {error}",
+    }
+
+
 def _normalise_axis(col: pd.Series) -> pd.Series:
     """One type per axis column (Parquet needs it): numbers -> float, booleans -> boolean, else str."""
     vals = [v for v in col.tolist() if v is not None and not (isinstance(v, float) and math.isnan(v))]
@@ -248,7 +274,9 @@ def collect(runs_dir: str | Path) -> pd.DataFrame:
     """Read every results.json under runs_dir into the long table (no file written).
 
     Runs found twice (same run_id in two folders, e.g. a copied run) are kept once, the first in
-    path order; the duplicates are listed in `df.attrs["warnings"]`.
+    path order; the duplicates are listed in `df.attrs["warnings"]`. A results.json that cannot be
+    read (truncated, not the schema) becomes one failed row with the error as its reason and is
+    listed in `df.attrs["unreadable"]`; when no file can be read at all, that is an InputError.
     """
     runs_dir = Path(runs_dir)
     paths = find_results(runs_dir)
@@ -257,15 +285,25 @@ def collect(runs_dir: str | Path) -> pd.DataFrame:
     rows: list[dict] = []
     seen: dict[str, Path] = {}
     warnings: list[str] = []
+    unreadable: list[str] = []
     for p in paths:
-        res = read_json(p)
-        run_id = str(res.get("run_id")) if isinstance(res, dict) else None
-        if run_id is not None and run_id in seen:
-            warnings.append(f"{p}: run_id {run_id} already read from {seen[run_id]}; duplicate ignored")
-            continue
-        rows.extend(_rows_for(p, res, KNOWN_METRICS))
+        try:
+            res = read_json(p)
+            run_id = str(res.get("run_id")) if isinstance(res, dict) else None
+            if run_id is not None and run_id in seen:
+                warnings.append(f"{p}: run_id {run_id} already read from {seen[run_id]}; duplicate ignored")
+                continue
+            rows.extend(_rows_for(p, res, KNOWN_METRICS))
+        except InputError as e:  # one bad file never hides the other runs: it becomes a failed row
+            unreadable.append(str(e))
+            warnings.append(f"could not read {e}")
+            run_id = None
+            rows.append(_unreadable_row(p, str(e)))
         if run_id is not None:
             seen[run_id] = p
+    if unreadable and len(unreadable) == len(paths):
+        more = f" (and {len(unreadable) - 1} more)" if len(unreadable) > 1 else ""
+        raise InputError(f"{runs_dir}: no results.json could be read: {unreadable[0]}{more}")
     df = pd.DataFrame(rows)
     for c in BASE_COLUMNS + TAIL_COLUMNS:
         if c not in df.columns:
@@ -287,6 +325,7 @@ def collect(runs_dir: str | Path) -> pd.DataFrame:
         elif c not in ("value", "seed") and not c.startswith("axis."):
             df[c] = _objects(df[c])
     df.attrs["warnings"] = warnings
+    df.attrs["unreadable"] = unreadable
     df.attrs["runs_dir"] = str(runs_dir)
     return df
 

@@ -86,7 +86,6 @@ INIT_MODES = ("auto", "points", "random")
 QUERY_MODES = ("encode", "decode")
 PROTOCOLS = ("auto", "lerf", "3dovs")
 LPIPS_NETS = ("vgg", "alex")
-LPIPS_INPUTS = ("lpips-[-1,1]", "3dgs-[0,1]")
 HOLDOUTS = ("every-8", "none")
 EVAL_RESOLUTIONS = ("reference", "train")
 LERF_KERNEL_MODES = ("auto", "reference")
@@ -171,9 +170,8 @@ RULES: dict[str, Rule] = {
     "removal.threshold": Rule(low=-1.0, high=1.0),
     "eval.protocol": one_of(*PROTOCOLS),
     "eval.lpips_net": one_of(*LPIPS_NETS),
-    "eval.lpips_input": one_of(*LPIPS_INPUTS),
     "eval.resolution": one_of(*EVAL_RESOLUTIONS),
-    "eval.ovs3d_downsample": at_least(1, integer=True),
+    "eval.ovs3d_downsample": at_least(1, kind="int", integer=True),   # null = the reference's rule
     "eval.lerf_kernels": one_of(*LERF_KERNEL_MODES),
     "eval.fps_warmup": at_least(0),
     "eval.fps_repeats": at_least(1),

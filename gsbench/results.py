@@ -28,7 +28,9 @@ QUERY_MODES = ("encode", "decode")
 FRAME_SETS = ("reference", "held-out")
 FRAME_SET_SUFFIX = {"reference": "", "held-out": "_heldout"}
 
-IMAGE_METRICS = ("psnr", "ssim", "lpips", "fps")
+# ssim / lpips: the 3DGS forms (zero-padded SSIM, LPIPS on [0, 1] inputs) that 3DGS-family papers report;
+# ssim_valid / lpips_package: the valid-region SSIM and the LPIPS package's [-1, 1] input convention.
+IMAGE_METRICS = ("psnr", "ssim", "lpips", "fps", "ssim_valid", "lpips_package")
 SEG_BASES = {"3dovs": ("miou", "mbiou", "pixel_acc", "pixel_acc_labelled"), "lerf": ("miou", "loc_acc")}
 MASK_FOLDER_METRICS = ("mbiou_lerf",)
 REMOVAL_METRICS = ("removal_residual", "removal_psnr_outside")

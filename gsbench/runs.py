@@ -60,6 +60,15 @@ def _device(cfg: dict) -> str:
         return "cpu"
 
 
+def dropped_line(dropped: dict) -> str:
+    """What the resolver left out, on one line: parts sharing a reason are listed before it once."""
+    by_reason: dict[str, list[str]] = {}
+    for part, why in dropped.items():
+        by_reason.setdefault(str(why), []).append(str(part))
+    return "dropped (not used by this run): " + "; ".join(f"{', '.join(parts)} ({why})"
+                                                       for why, parts in by_reason.items())
+
+
 def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: bool = True) -> Path:
     """Resolve `config` for the scene, train (or resume) and write the run folder; returns run_dir.
 
@@ -88,8 +97,8 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
     cfg, dropped = resolve_for_scene(config, scene)
     cfg["scene"] = {"path": str(scene_path.resolve()), "name": scene.name, "fingerprint": fp}
     cfg["run_id"] = rid
-    for part, why in dropped.items():
-        log.warning("gsbench train: dropped %s: %s", part, why)
+    if dropped:
+        log.warning("%s", dropped_line(dropped))
     run_dir.mkdir(parents=True, exist_ok=True)
     seed = int(cfg["seed"])
     torch.manual_seed(seed)

@@ -27,6 +27,7 @@ import json
 import math
 import os
 import tempfile
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -138,22 +139,68 @@ def read_jsonl(path: str | os.PathLike) -> list[dict]:
     return out
 
 
+_PLAIN = (str, int, float, bool, type(None))
+
+
+def _check_plain(obj: Any, where: str = "") -> None:
+    """Raise TypeError unless `obj` is tensors and plain values only (what `load_torch` accepts)."""
+    import torch
+    if type(obj) in _PLAIN or isinstance(obj, torch.Tensor):     # exact types: numpy.float64 is a float
+        return
+    if type(obj) in (dict, OrderedDict):          # state_dict() is an OrderedDict
+        for k, v in obj.items():
+            if type(k) not in _PLAIN:
+                raise TypeError(f"key {k!r} at {where or '/'} is a {type(k).__name__}")
+            _check_plain(v, f"{where}/{k}")
+        return
+    if type(obj) in (list, tuple):
+        for i, v in enumerate(obj):
+            _check_plain(v, f"{where}/{i}")
+        return
+    raise TypeError(f"{where or '/'} is a {type(obj).__module__}.{type(obj).__name__}, not a tensor or plain value")
+
+
 def save_torch_atomic(path: str | os.PathLike, obj: Any) -> None:
+    """Save tensors and plain values (dict, list, tuple, str, int, float, bool, None) atomically.
+
+    Anything else is refused here, so every file gsbench writes loads with `load_torch`."""
     import io
 
     import torch
+    _check_plain(obj)
     buf = io.BytesIO()
     torch.save(obj, buf)
     write_bytes_atomic(path, buf.getvalue())
 
 
+def _refusal(e: Exception) -> str:
+    """The object torch refused to build (e.g. "GLOBAL posix.system"), else the message's first line."""
+    import re
+    m = re.search(r"GLOBAL [\w.]+", str(e))
+    if m:
+        return f"it would call or build {m.group(0)[len('GLOBAL '):]}"
+    lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+    return lines[0] if lines else type(e).__name__
+
+
 def load_torch(path: str | os.PathLike) -> Any:
-    """Load a checkpoint; a truncated or corrupt file is an InputError naming the file."""
+    """Load a checkpoint or model file as data: tensors and plain values only.
+
+    Files in run folders may come from elsewhere; a pickle that would build any other object (and so
+    could run code) is refused with an InputError naming the file, before anything in it runs. A
+    truncated or corrupt file is an InputError naming the file too."""
+    import pickle
+
     import torch
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: checkpoint not found")
     try:
-        return torch.load(path, map_location="cpu", weights_only=False)
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        if "weights only" in str(e).lower() or "GLOBAL" in str(e):
+            raise InputError(f"{path}: refused: holds Python objects other than tensors and plain values, "
+                             f"which could run code ({_refusal(e)}); gsbench loads run files as data only") from None
+        raise InputError(f"{path}: corrupt or truncated checkpoint (UnpicklingError: {_refusal(e)})") from None
     except Exception as e:  # torch raises several types for corrupt files
-        raise InputError(f"{path}: corrupt or truncated checkpoint ({type(e).__name__}: {e})") from None
+        raise InputError(f"{path}: corrupt or truncated checkpoint ({type(e).__name__}: {_refusal(e)})") from None

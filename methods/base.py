@@ -21,10 +21,10 @@ import logging
 from pathlib import Path
 from typing import Optional
 
-import cv2
 import numpy as np
 import torch
 
+from gsbench.datasets.imageio import resize_rgb
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.methods.autoencoder import FeatureAutoencoder
@@ -237,8 +237,7 @@ def load_views(scene, config: dict, progress: bool = False,
             raise InputError(f"{scene.image_paths[i] if scene.image_paths else scene.path}: expected an RGB image, "
                              f"got shape {img.shape}")
         img = img[..., :3]
-        if img.shape[1] != W or img.shape[0] != H:
-            img = cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA)
+        img = resize_rgb(img, W, H)        # 3DGS's rule: PIL bicubic on the 8-bit image
         return scene.cameras[i].resized(W, H), torch.from_numpy(np.clip(img, 0.0, 1.0).copy()).to(device)
 
     views = TrainViews({}, {})

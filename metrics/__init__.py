@@ -8,8 +8,9 @@ Bad input raises gsbench.errors.InputError. Images are (H, W) or (H, W, C) in [0
 Image metrics (image.py, perceptual.py)
   psnr(pred, gt, *, quantize=True, mask=None) -> float         uint8-rounded by default; 100 dB cap;
                                                                mask: MSE over selected pixels only
-  ssim(pred, gt, *, border="valid"|"zeropad") -> float        Gaussian 11 / 1.5, K1 .01, K2 .03
-  ssim_map(pred, gt, *, border="valid") -> (H', W', C) array
+  ssim(pred, gt, *, border="zeropad"|"valid") -> float      Gaussian 11 / 1.5, K1 .01, K2 .03;
+                                                               zeropad = the 3DGS form (default)
+  ssim_map(pred, gt, *, border="zeropad") -> (H', W', C) array
   lpips(pred, gt, *, net="vgg"|"alex", model=None, weights_dir=None, device="cpu") -> LPIPSResult
       LPIPSResult(value: float | None, reason: str | None, impl: str, net: str); value None
       with the reason when the weights are absent ($GSBENCH_WEIGHTS or the torch hub cache).
@@ -72,12 +73,16 @@ from .segmentation import BIOU_IMPL, IOU_IMPL, boundary_band, boundary_iou, boun
 from .timing import FPS_IMPL, time_fps
 
 #: metric name (gsbench.results.METRIC_NAMES) -> implementation id of the default settings.
-#: A caller that changes a setting (quantize=False, border="zeropad", net="alex", ...) records
-#: the id of that setting: PSNR_IMPL[quantize], SSIM_IMPL[border], lpips_impl(net).
+#: A caller that changes a setting (quantize=False, border="valid", net="alex", ...) records
+#: the id of that setting: PSNR_IMPL[quantize], SSIM_IMPL[border], lpips_impl(net, input_range=...).
+#: `ssim` and `lpips` are the 3DGS forms (what 3DGS-family papers report); `ssim_valid` and
+#: `lpips_package` keep the other conventions.
 METRIC_IMPL: dict[str, str] = {
     "psnr": PSNR_IMPL[True],
-    "ssim": SSIM_IMPL["valid"],
-    "lpips": lpips_impl("vgg"),
+    "ssim": SSIM_IMPL["zeropad"],
+    "ssim_valid": SSIM_IMPL["valid"],
+    "lpips": lpips_impl("vgg", input_range="3dgs-[0,1]"),
+    "lpips_package": lpips_impl("vgg", input_range="lpips-[-1,1]"),
     "fps": FPS_IMPL,
     "iou": IOU_IMPL,
     "boundary_iou": BIOU_IMPL,

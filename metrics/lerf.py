@@ -40,7 +40,8 @@ LERF_BLEND_KERNEL = 30
 LERF_THRESHOLD = 0.7
 LERF_SMOOTH_RADIUS = 3
 MISSING_POLICIES = ("error", "skip", "zero")
-LERF_IMPL = "lerf-ovs/langsplat/v1"
+LERF_IMPL = "lerf-ovs/langsplat/v2"   # v2: empty-GT pairs counted (EMPTY_GT_RULE)
+EMPTY_GT_RULE = "an empty GT mask is scored |P & G| / |P | G| (0 unless the prediction is empty too, then 1)"
 LERF_REFERENCE_WIDTH = 985    # width of the LERF-OVS label images the 30 px / 7 px kernels were made for
 LERF_KERNEL_MODES = ("reference", "auto")
 
@@ -218,9 +219,11 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
     missing: what a pair without a prediction does. "error" (default) raises InputError naming
     it; "skip" leaves it out of the means and lists it in `skipped`; "zero" scores IoU 0 and a
     localization miss (counted in the means) and also lists it in `skipped`.
-    A pair whose GT mask is empty (or absent) gets no IoU and is listed in `skipped` (IoU is not
-    defined for it; LangSplat's labels never contain one); its localization still counts when
-    it has boxes. A pair with neither a mask nor boxes is an InputError.
+    A pair whose GT mask is empty is counted as LangSplat's evaluation counts it, |P & G| / |P | G|:
+    IoU 0 when the prediction marks any pixel; when both are empty (0 / 0 there, which would make
+    its mean NaN) IoU 1, the rule `eval --masks` applies too (EMPTY_GT_RULE). Such pairs carry
+    "empty_gt": True. A pair without a GT mask gets no IoU and is listed in `skipped`; its
+    localization still counts when it has boxes. A pair with neither a mask nor boxes is an InputError.
     """
     if missing not in MISSING_POLICIES:
         raise InputError(f"missing must be one of {MISSING_POLICIES}, got {missing!r}")
@@ -255,12 +258,13 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
         if gt is not None and gt.shape != maps[0].shape:
             raise InputError(f"{tag}: GT mask {gt.shape} and relevancy {maps[0].shape} differ in size; "
                              "resize the GT (NEAREST) to the evaluation resolution first")
-        if gt is None or not gt.any():
-            skipped.append({"frame": p.frame, "query": p.query,
-                            "reason": "no GT mask" if gt is None else "empty GT mask (IoU undefined)"})
+        if gt is None:
+            skipped.append({"frame": p.frame, "query": p.query, "reason": "no GT mask"})
         else:
             pred = lerf_mask(blended[lvl], threshold=threshold, window=window, radius=kernels.radius)
-            entry["iou"] = iou(pred, gt)
+            entry["iou"] = iou(pred, gt, empty=1.0)
+            if not gt.any():
+                entry["empty_gt"] = True
             ious.append(entry["iou"])
         if has_boxes:
             entry["localized"] = lerf_localization(maps, p.gt_bboxes, kernels.blend)

@@ -49,7 +49,8 @@ LPIPS_SCALE = (0.458, 0.448, 0.450)
 LPIPS_MIN_SIZE = 32
 WEIGHTS_ENV = "GSBENCH_WEIGHTS"
 #: input range fed to the network: the LPIPS package maps [0, 1] images to [-1, 1] (2x - 1);
-#: the 3DGS metrics script feeds the [0, 1] images unscaled, which reads lower.
+#: the 3DGS metrics script feeds the [0, 1] images unscaled. The two give different numbers; the
+#: evaluation keeps both (`lpips` = 3DGS's, `lpips_package`).
 LPIPS_RANGES = ("lpips-[-1,1]", "3dgs-[0,1]")
 LPIPS_DEFAULT_RANGE = "lpips-[-1,1]"
 

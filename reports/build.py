@@ -52,6 +52,7 @@ class ReportSummary:
     plots: list[Path] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     collected: Path | None = None
+    unreadable: int = 0          # results.json files that could not be read (each a failed run row)
 
 
 def _writer_version() -> str:
@@ -94,6 +95,10 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
     for stale in [*plot_dir.glob("*.png"), *table_dir.glob("*.md"), *table_dir.glob("*.tex")]:
         stale.unlink()
     summary = ReportSummary(out_dir=out_dir, index=out_dir / "index.html")
+    summary.unreadable = len(df.attrs.get("unreadable", []))
+    if summary.unreadable:
+        summary.notes.append(f"Could not read {summary.unreadable} results.json file(s); each run is reported as "
+                             "failed with the reason, the other runs as usual.")
     summary.notes += list(df.attrs.get("warnings", []))
     summary.collected = write_collected(df, out_dir)
 

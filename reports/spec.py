@@ -23,8 +23,11 @@ def _pct(label: str, better: str = "higher") -> MetricSpec:
 
 METRICS: dict[str, MetricSpec] = {
     "psnr": MetricSpec("PSNR (dB)", "PSNR (dB)", "higher", 1.0, 2),
+    # ssim / lpips are the 3DGS forms (comparable with 3DGS-family papers); the other conventions:
     "ssim": MetricSpec("SSIM", "SSIM", "higher", 1.0, 3),
     "lpips": MetricSpec("LPIPS", "LPIPS", "lower", 1.0, 3),
+    "ssim_valid": MetricSpec("SSIM (valid region)", "SSIM (valid)", "higher", 1.0, 3),
+    "lpips_package": MetricSpec("LPIPS ([-1, 1] input)", "LPIPS ($[-1,1]$ input)", "lower", 1.0, 3),
     "fps": MetricSpec("FPS", "FPS", "higher", 1.0, 1),
     "miou_3dovs": _pct("mIoU"),
     "mbiou_3dovs": _pct("mBIoU"),

@@ -102,20 +102,28 @@ def test_csv_fallback_without_pyarrow(runs: Path, monkeypatch):
 
 
 def test_bad_results_name_the_file(tmp_path: Path):
+    """A bad results.json becomes one failed row whose reason names the file and the problem."""
     root = tmp_path / "runs"
     d = write_run(root, "a", method="gaussiands", scene="bench", metrics={"psnr": 20.0})
+    write_run(root, "b", method="vanilla", scene="bench", metrics={"psnr": 21.0})
     res = json.loads((d / "results.json").read_text())
+
+    def reason_of(text: str) -> str:
+        (d / "results.json").write_text(text)
+        df = collect(root)
+        bad = df[df["run_dir"] == str(d)]
+        assert len(bad) == 1 and bad.iloc[0]["status"] == "failed" and math.isnan(bad.iloc[0]["value"])
+        assert len(df.attrs["unreadable"]) == 1 and df[df["metric"] == "psnr"]["value"].tolist() == [21.0]
+        return bad.iloc[0]["reason"]
+
     del res["scene"]
-    (d / "results.json").write_text(json.dumps(res))
-    with pytest.raises(InputError, match=r"a/results.json: missing key 'scene'"):
-        collect(root)
+    assert "a/results.json: missing key 'scene'" in reason_of(json.dumps(res))
     res["scene"] = "bench"
     res["metrics"]["psnr"] = "high"
-    (d / "results.json").write_text(json.dumps(res))
-    with pytest.raises(InputError, match=r"results.json: metrics.psnr must be a number"):
-        collect(root)
-    (d / "results.json").write_text('{"run_id": "x", ')
-    with pytest.raises(ValueError, match=r"a/results.json: corrupt or truncated JSON"):
+    assert "results.json: metrics.psnr must be a number" in reason_of(json.dumps(res))
+    assert "a/results.json: corrupt or truncated JSON" in reason_of('{"run_id": "x", ')
+    (root / "b" / "results.json").write_text("{")              # nothing readable at all: an error
+    with pytest.raises(InputError, match=r"no results.json could be read: .*corrupt or truncated JSON.* 1 more"):
         collect(root)
 
 

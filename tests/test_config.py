@@ -285,7 +285,6 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     from gsbench.evaluation.segmentation import PROTOCOLS
     from gsbench.methods.losses import DEPTH_FORMULATIONS, DS_AVERAGES
     from gsbench.metrics.lerf import LERF_KERNEL_MODES
-    from gsbench.metrics.perceptual import LPIPS_RANGES
     from gsbench.priors.depth import DEPTH_PROVIDERS
     from gsbench.priors.features import FEATURE_PROVIDERS
     from gsbench.priors.ordering import ORDERINGS
@@ -295,7 +294,6 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     assert set(config_keys.HOLDOUTS) == set(HOLDOUT_CHOICES)
     assert set(config_keys.EVAL_RESOLUTIONS) == set(RESOLUTIONS)
     assert set(config_keys.LERF_KERNEL_MODES) == set(LERF_KERNEL_MODES)
-    assert set(config_keys.LPIPS_INPUTS) == set(LPIPS_RANGES)
     assert set(config_keys.BACKENDS) == {"auto", *BACKENDS}
     assert set(config_keys.DEPTH_FORMULATIONS) == set(DEPTH_FORMULATIONS)
     assert set(config_keys.DS_AVERAGES) == set(DS_AVERAGES)

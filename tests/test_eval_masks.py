@@ -145,7 +145,7 @@ def test_bad_inputs_name_the_problem(tmp_path):
         score_mask_folder(tmp_path / "nope", layout, "3dovs")
     with pytest.raises(InputError, match="classes.txt"):
         score_mask_folder(tmp_path / "pred", tmp_path / "pred", "3dovs")
-    with pytest.raises(InputError, match="no LERF-OVS label files"):
+    with pytest.raises(InputError, match=r"holds no frame_\*.json label files; LERF-OVS label files usually"):
         score_mask_folder(tmp_path / "pred", layout, "lerf")
     bad = tmp_path / "pred" / "0.png"
     cv2.imwrite(str(bad), np.full((8, 10), 7, np.uint8))
@@ -228,3 +228,26 @@ def test_gt_masks_downsampled_by_centre_sampling_score_100(tmp_path, factor):
     for res, p in ((r3, "3dovs"), (rl, "lerf")):
         assert res["metrics"][f"miou_{p}"] == pytest.approx(1.0)
         assert res["metrics"][f"mbiou_{p}"] == pytest.approx(1.0)
+
+
+def test_empty_gt_pair_scored_by_the_same_rule_as_the_run_path(tmp_path):
+    """A label whose polygon vanishes on the prediction's grid has an empty GT there. eval --masks
+    counts it with the run path's rule (metrics.lerf.evaluate_lerf_scene): IoU 0 for a non-empty
+    prediction, 1 when the prediction is empty too."""
+    from gsbench.metrics.lerf import LerfPair, evaluate_lerf_scene
+    labels = tmp_path / "labels"
+    labels.mkdir()
+    obj = {"category": "dot", "bbox": [0, 0, 1, 1], "segmentation": [[0, 0], [0, 0], [0, 0]]}   # pixel (0, 0)
+    (labels / "frame_00001.json").write_text(json.dumps({"info": {"width": 32, "height": 24,
+                                                                  "name": "frame_00001.jpg"}, "objects": [obj]}))
+    full = np.ones((12, 16), bool)
+    _write(tmp_path / "some" / "frame_00001" / "dot.png", full)      # 16x12: centre sampling skips pixel (0, 0)
+    _write(tmp_path / "none" / "frame_00001" / "dot.png", ~full)
+    some = score_mask_folder(tmp_path / "some", labels, "lerf")
+    none = score_mask_folder(tmp_path / "none", labels, "lerf")
+    block = np.full((12, 16), 0.1)
+    block[2:10, 3:13] = 0.9
+    run_some = evaluate_lerf_scene([LerfPair("f", "dot", [block], ~full)]).miou                # predicts pixels
+    run_none = evaluate_lerf_scene([LerfPair("f", "dot", [np.full((12, 16), 0.3)], ~full)]).miou  # predicts none
+    assert some["pairs"][0]["iou"] == run_some == 0.0 and some["metrics"]["miou_lerf"] == 0.0
+    assert none["pairs"][0]["iou"] == run_none == 1.0 and none["metrics"]["miou_lerf"] == 1.0

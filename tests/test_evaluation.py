@@ -52,7 +52,7 @@ def test_holdout_none_trains_on_every_view(lerf_scene):
 def test_image_metrics_skip_with_reason_without_held_out_views(lerf_scene):
     from gsbench.evaluation.image import image_metrics
     b = image_metrics(None, lerf_scene, [], [], _cfg())
-    assert b.metrics == {"psnr": None, "ssim": None, "lpips": None}
+    assert b.metrics == {"psnr": None, "ssim": None, "ssim_valid": None, "lpips": None, "lpips_package": None}
     assert all("holdout" in b.skipped[k] for k in b.metrics)
 
 
@@ -225,12 +225,30 @@ def test_ssim_reads_quantised_renders(lerf_scene):
     assert ssim(np.clip(raw, 0, 1), lerf_scene.image(0)) < 1.0 - 1e-6
 
 
-def test_bad_lpips_input_is_a_config_error_not_a_skip(lerf_scene):
+def test_both_ssim_and_lpips_conventions_are_kept_with_their_ids(lerf_scene, monkeypatch):
+    """`ssim` / `lpips` are the 3DGS forms (zero-padded SSIM, LPIPS on [0, 1] inputs) and
+    `ssim_valid` / `lpips_package` the other conventions; each value equals the metric computed
+    directly with that convention (LPIPS: a seeded random-init network, weight-free)."""
     from gsbench.evaluation.image import image_metrics
-    cfg = _cfg()
-    cfg["eval"]["lpips_input"] = "[0,255]"
-    with pytest.raises(InputError, match="eval.lpips_input"):
-        image_metrics(_ExactUpToRounding(lerf_scene), lerf_scene, [0], [lerf_scene.cameras[0]], cfg)
+    from gsbench.metrics import image as MI
+    from gsbench.metrics import perceptual as MP
+    net = MP.build_lpips_network("vgg", random_init=True, seed=0)
+    monkeypatch.setattr(MP, "load_lpips", lambda name="vgg", weights_dir=None: (net, None))
+    cam = lerf_scene.cameras[0]
+    render = np.clip(lerf_scene.image(0) + np.random.default_rng(1).normal(0, 0.1, (48, 64, 3)), 0, 1)
+    method = type("Noisy", (), {"render": lambda self, c: _Out(render)})()
+    b = image_metrics(method, lerf_scene, [0], [cam], _cfg())
+    pred = MI.quantize_uint8(render)
+    gt = MI.quantize_uint8(lerf_scene.image(0))
+    assert "zeropad-3dgs" in b.metric_impl["ssim"] and "/valid/" in b.metric_impl["ssim_valid"]
+    assert "input3dgs-[0,1]" in b.metric_impl["lpips"] and "inputlpips-[-1,1]" in b.metric_impl["lpips_package"]
+    assert b.metrics["ssim"] == pytest.approx(MI.ssim(pred, gt, border="zeropad"), abs=1e-12)
+    assert b.metrics["ssim_valid"] == pytest.approx(MI.ssim(pred, gt, border="valid"), abs=1e-12)
+    l3 = MP.lpips(pred, gt, model=net, input_range="3dgs-[0,1]").value
+    lp = MP.lpips(pred, gt, model=net, input_range="lpips-[-1,1]").value
+    assert b.metrics["lpips"] == pytest.approx(l3, rel=1e-6)
+    assert b.metrics["lpips_package"] == pytest.approx(lp, rel=1e-6)
+    assert abs(l3 - lp) > 1e-6                                   # two different numbers, each under its own name
 
 
 class _RandomSemantics:
@@ -260,3 +278,57 @@ def test_lerf_scoring_ids_sizes_and_frames(lerf_scene):
     assert len(enc.per_view["miou_lerf"]) == 3
     held = score_lerf(_RandomSemantics(), lerf_scene, [], cfg, "encode", "encode", "held-out")
     assert held.metrics["miou_lerf_heldout"] is None and "held-out" in held.skipped["miou_lerf_heldout"]
+
+
+def test_gt_and_training_images_are_resized_as_3dgs_loads_them(lerf_scene):
+    """3DGS loads an image with PIL and resizes it with Image.resize's default (bicubic) on the
+    8-bit image; the evaluation GT and the training images follow it (the old rule, cv2 INTER_AREA
+    on floats, differed by up to several 8-bit steps)."""
+    import cv2
+    from PIL import Image
+
+    from gsbench.evaluation.image import resize_image
+    from gsbench.methods.base import load_views
+    path = lerf_scene.image_paths[0]
+    with Image.open(path) as im:
+        ref = np.asarray(im.convert("RGB").resize((32, 24), Image.BICUBIC), np.float32) / 255.0
+    ours = resize_image(lerf_scene.image(0), 32, 24)
+    assert ours.shape == (24, 32, 3)
+    np.testing.assert_allclose(ours, ref, atol=1e-7)
+    area = cv2.resize(np.asarray(lerf_scene.image(0), np.float32), (32, 24), interpolation=cv2.INTER_AREA)
+    assert np.abs(area - ref).max() > 1.5 / 255                    # the rule matters
+    cfg = {"seed": 0, "train": {"max_width": 32, "eval_views": 0, "holdout": "every-8"}}
+    views, size = load_views(lerf_scene, cfg)
+    assert size == (32, 24)
+    np.testing.assert_allclose(views.images[1].numpy(), np.asarray(
+        Image.open(lerf_scene.image_paths[1]).convert("RGB").resize((32, 24), Image.BICUBIC), np.float32) / 255.0,
+        atol=1e-7)
+
+
+def test_3dovs_scored_at_the_reference_size_on_a_real_capture(tmp_path_factory):
+    """The 3D-OVS reference scores at int(W / 8) x int(H / 8) of its images (--downsample_test 8).
+    A real capture gets that by default, a generated scene (stored at its scoring size) 1; an
+    explicit eval.ovs3d_downsample wins; the size and the rule are recorded."""
+    from gsbench.datasets import load_scene
+    from gsbench.datasets.synthetic import make_scene
+    from gsbench.evaluation.frames import segmentation_camera
+    from gsbench.evaluation.segmentation import score_3dovs
+    out = make_scene("tabletop-small", tmp_path_factory.mktemp("o") / "t", seed=0, views=9, resolution=(128, 96))
+    gen = load_scene(out)
+    real = load_scene(out)
+    real.meta.pop("synthetic")                       # as a downloaded 3D-OVS capture: no generator record
+    cfg = {"train": {"max_width": None}, "eval": {}}
+    i = real.semantic_view_ids[0] if real.semantic_view_ids else 0
+    c = segmentation_camera(gen, i, "3dovs", cfg)
+    assert (c.width, c.height) == (128, 96)
+    c = segmentation_camera(real, i, "3dovs", cfg)
+    assert (c.width, c.height) == (128 // 8, 96 // 8)
+    c = segmentation_camera(real, i, "3dovs", {"train": {}, "eval": {"ovs3d_downsample": 2}})
+    assert (c.width, c.height) == (64, 48)
+    b = score_3dovs(_RandomSemantics(), real, [i], cfg, "encode", "encode", "reference")
+    assert b.resolution["3dovs/reference"] == "16x12"
+    assert b.notes["3dovs_size"] == ("1/8 of the 128x96 images "
+                                     "(real capture: the 3D-OVS reference's --downsample_test 8)")
+    assert "+size-1/8+query-encode" in b.metric_impl["miou_3dovs"]
+    g = score_3dovs(_RandomSemantics(), gen, [i], cfg, "encode", "encode", "reference")
+    assert g.resolution["3dovs/reference"] == "128x96" and "+size-1/1" in g.metric_impl["miou_3dovs"]

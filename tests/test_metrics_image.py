@@ -1,4 +1,5 @@
-"""PSNR and SSIM: hand-computed values and agreement with scikit-image."""
+"""PSNR and SSIM: hand-computed values, agreement with scikit-image (valid form) and with the 3DGS
+formula re-typed independently (zero-padded form, the default)."""
 from __future__ import annotations
 
 import math
@@ -77,7 +78,7 @@ def test_ssim_matches_skimage_random(shape):
     rng = np.random.default_rng(sum(shape))
     a = rng.random(shape)
     b = np.clip(a + 0.15 * rng.standard_normal(shape), 0, 1)
-    assert abs(ssim(a, b) - _skimage(a, b)) <= SSIM_TOL
+    assert abs(ssim(a, b, border="valid") - _skimage(a, b)) <= SSIM_TOL
 
 
 def test_ssim_matches_skimage_natural_like():
@@ -87,16 +88,16 @@ def test_ssim_matches_skimage_natural_like():
         np.clip(a + 0.05 * np.random.default_rng(2).standard_normal(a.shape), 0, 1),
         np.roll(a, 2, axis=1),
     ):
-        assert abs(ssim(a, b) - _skimage(a, b)) <= SSIM_TOL
+        assert abs(ssim(a, b, border="valid") - _skimage(a, b)) <= SSIM_TOL
 
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/kaolin_clock absent (fresh clone)")
 def test_ssim_matches_skimage_real_views():
     a = cv2.imread(str(SHARED / "0_rgb.png"))[..., ::-1] / 255.0
     b = cv2.imread(str(SHARED / "1_rgb.png"))[..., ::-1] / 255.0
-    assert abs(ssim(a, b) - _skimage(a, b)) <= SSIM_TOL
+    assert abs(ssim(a, b, border="valid") - _skimage(a, b)) <= SSIM_TOL
     blurred = cv2.GaussianBlur(a, (7, 7), 2.0)
-    assert abs(ssim(a, blurred) - _skimage(a, blurred)) <= SSIM_TOL
+    assert abs(ssim(a, blurred, border="valid") - _skimage(a, blurred)) <= SSIM_TOL
 
 
 def _ssim_zeropad_reference(a, b):
@@ -134,12 +135,52 @@ def test_ssim_properties_and_errors():
     b = np.clip(a + 0.1, 0, 1)
     assert ssim(a, b) == pytest.approx(ssim(b, a), abs=1e-12)
     with pytest.raises(InputError):
-        ssim(np.zeros((8, 8)), np.zeros((8, 8)))        # smaller than the 11x11 window
+        ssim(np.zeros((8, 8)), np.zeros((8, 8)), border="valid")        # smaller than the 11x11 window
     with pytest.raises(InputError):
         ssim(a, a, border="reflect")
 
 
 def test_impl_ids():
     assert METRIC_IMPL["psnr"] == PSNR_IMPL[True] and "uint8" in PSNR_IMPL[True]
-    assert METRIC_IMPL["ssim"] == SSIM_IMPL["valid"] and "valid" in SSIM_IMPL["valid"]
-    assert "zeropad" in SSIM_IMPL["zeropad"]
+    assert METRIC_IMPL["ssim"] == SSIM_IMPL["zeropad"] and "zeropad-3dgs" in SSIM_IMPL["zeropad"]
+    assert METRIC_IMPL["ssim_valid"] == SSIM_IMPL["valid"] and "valid" in SSIM_IMPL["valid"]
+
+
+def _ssim_3dgs_scipy(a, b):
+    """The 3DGS `ssim` re-typed in float64 with scipy: 2-D Gaussian window 11 / 1.5 as the outer
+    product of the normalised 1-D taps exp(-(x - 5)^2 / 4.5), per-channel correlation with zero
+    padding of 5 px (same-size output), C1 = 0.01^2, C2 = 0.03^2, mean over the whole map."""
+    from scipy.ndimage import correlate
+    t = np.array([math.exp(-((x - 5) ** 2) / (2 * 1.5 ** 2)) for x in range(11)])
+    t /= t.sum()
+    win = np.outer(t, t)
+    a3 = a if a.ndim == 3 else a[..., None]
+    b3 = b if b.ndim == 3 else b[..., None]
+    vals = []
+    for c in range(a3.shape[2]):
+        x, y = a3[..., c].astype(np.float64), b3[..., c].astype(np.float64)
+        f = lambda z: correlate(z, win, mode="constant", cval=0.0)  # noqa: E731
+        mx, my = f(x), f(y)
+        vx, vy, cxy = f(x * x) - mx * mx, f(y * y) - my * my, f(x * y) - mx * my
+        vals.append(((2 * mx * my + 1e-4) * (2 * cxy + 9e-4)) / ((mx * mx + my * my + 1e-4) * (vx + vy + 9e-4)))
+    return float(np.mean(np.stack(vals, -1)))
+
+
+@pytest.mark.parametrize("shape", [(96, 128, 3), (48, 64, 3), (37, 41), (5, 7, 3)])
+def test_default_ssim_is_the_3dgs_form(shape):
+    rng = np.random.default_rng(len(shape) + shape[0])
+    a = _natural_like(shape[0], shape[1], 3) if len(shape) == 3 else rng.random(shape)
+    b = np.clip(a + 0.08 * rng.standard_normal(a.shape), 0, 1)
+    ref = _ssim_3dgs_scipy(a, b)
+    assert ssim(a, b) == pytest.approx(ref, abs=1e-10)
+    assert ssim(a, b, border="zeropad") == pytest.approx(ref, abs=1e-10)
+
+
+def test_3dgs_form_reads_higher_than_the_valid_region():
+    """The zero frame is shared by both images, so the 3DGS form reads above the valid-region mean
+    (the docs said the opposite before): measured on 128x96 natural-like pairs at three noise levels."""
+    for seed, sd in ((0, 0.02), (1, 0.08), (2, 0.2)):
+        rng = np.random.default_rng(seed)
+        a = _natural_like(96, 128, seed)
+        b = np.clip(cv2.GaussianBlur(a, (5, 5), 1.0) + sd * rng.standard_normal(a.shape), 0, 1)
+        assert ssim(a, b, border="zeropad") > ssim(a, b, border="valid")

@@ -148,10 +148,17 @@ def test_missing_predictions_are_never_silently_dropped():
 
 
 def test_empty_gt_and_bad_input():
+    """An empty GT mask is counted as LangSplat counts it: |P & G| / |P | G| = 0 for a non-empty
+    prediction; both empty (0 / 0 in the reference) scores 1, as in `eval --masks`."""
     empty = LerfPair("f", "q", [_block_map()], np.zeros((64, 64), bool), np.array([[20, 20, 39, 39]]))
     res = evaluate_lerf_scene([empty])
-    assert res.miou is None and res.n_iou == 0 and res.loc_acc == 1.0
-    assert "empty GT" in res.skipped[0]["reason"]
+    assert res.miou == 0.0 and res.n_iou == 1 and res.loc_acc == 1.0 and res.skipped == []
+    assert res.per_pair[0]["empty_gt"] is True
+    flat = LerfPair("f", "q", [np.full((64, 64), 0.4)], np.zeros((64, 64), bool))   # predicts nothing
+    assert evaluate_lerf_scene([flat]).miou == 1.0
+    no_mask = LerfPair("f", "q", [_block_map()], None, np.array([[20, 20, 39, 39]]))
+    res = evaluate_lerf_scene([no_mask])
+    assert res.miou is None and res.n_iou == 0 and res.skipped[0]["reason"] == "no GT mask"
     with pytest.raises(InputError, match="differ in size"):
         evaluate_lerf_scene([LerfPair("f", "q", [_block_map()], np.zeros((32, 32), bool))])
     with pytest.raises(InputError):

@@ -21,6 +21,10 @@ def run(args: argparse.Namespace) -> int:
     df = collect(args.runs_dir)
     for w in df.attrs.get("warnings", []):
         print(f"gsbench collect: warning: {w}", file=sys.stderr)
+    bad = df.attrs.get("unreadable", [])
+    if bad:
+        print(f"gsbench collect: could not read {len(bad)} results.json file(s); each is a failed row with the "
+              "reason, the other runs are collected", file=sys.stderr)
     out = write_collected(df, args.out or args.runs_dir)
     n_runs = df["run_id"].nunique()
     studies = sorted(

@@ -31,5 +31,8 @@ def run(args: argparse.Namespace) -> int:
     for n in summary.notes:
         print(f"gsbench report: note: {n}", file=sys.stderr)
     print(f"{len(summary.tables)} tables ({', '.join(summary.tables) or 'none'}), {len(summary.plots)} plots")
+    if summary.unreadable:
+        print(f"gsbench report: could not read {summary.unreadable} results.json file(s) (reported as failed runs)",
+              file=sys.stderr)
     print(f"Report: {summary.index}")
     return 0

@@ -4,9 +4,10 @@
   reference:      the labelled frames that were trained on - what the references score;
   held-out:       the labelled frames that were not trained on (a novel-view variant).
 reference + held-out = every labelled frame, so no label file goes unscored without a listed reason.
-Resolution (`eval.resolution`): "reference" scores 3D-OVS at the segmentation size divided by
-`eval.ovs3d_downsample` and LERF at each label file's size; "train" scores everything at the
-training resolution (the older behaviour, kept for comparison).
+Resolution (`eval.resolution`): "reference" scores 3D-OVS at the image size divided by
+`eval.ovs3d_downsample` (null: 8 on a real capture, as the 3D-OVS reference tests with
+--downsample_test 8; 1 on a scene gsbench generated, which is stored at its scoring size) and LERF
+at each label file's size; "train" scores everything at the training resolution.
 """
 from __future__ import annotations
 
@@ -60,26 +61,41 @@ def train_camera(camera, max_width):
     return camera if (w, h) == (camera.width, camera.height) else camera.resized(w, h)
 
 
-def eval_settings(config: dict) -> tuple[str, int]:
+OVS3D_REFERENCE_DOWNSAMPLE = 8     # the 3D-OVS reference scores at int(W / 8) x int(H / 8) of its images
+
+
+def eval_settings(config: dict) -> tuple[str, int | None]:
+    """(eval.resolution, eval.ovs3d_downsample) checked; the factor None means the reference's rule."""
     ev = config.get("eval") or {}
     res = ev.get("resolution", "reference")
     if res not in RESOLUTIONS:
         raise InputError(f"eval.resolution must be one of {', '.join(RESOLUTIONS)}, got {res!r}")
-    down = ev.get("ovs3d_downsample", 1)
-    if isinstance(down, bool) or not isinstance(down, int) or down < 1:
-        raise InputError(f"eval.ovs3d_downsample must be an integer >= 1, got {down!r}")
+    down = ev.get("ovs3d_downsample")
+    if down is not None and (isinstance(down, bool) or not isinstance(down, int) or down < 1):
+        raise InputError(f"eval.ovs3d_downsample must be null or an integer >= 1, got {down!r}")
     return res, down
+
+
+def ovs3d_downsample(scene, config: dict) -> tuple[int, str]:
+    """The factor 3D-OVS frames are scored at (1/factor of the images) and why."""
+    _, down = eval_settings(config)
+    if down is not None:
+        return down, "eval.ovs3d_downsample"
+    if (getattr(scene, "meta", None) or {}).get("synthetic") is not None:
+        return 1, "generated scene, stored at its scoring size"
+    return OVS3D_REFERENCE_DOWNSAMPLE, "real capture: the 3D-OVS reference's --downsample_test 8"
 
 
 def segmentation_camera(scene, i: int, protocol: str, config: dict):
     """The camera view i of `protocol` is scored at (see the module docstring)."""
-    res, down = eval_settings(config)
+    res, _ = eval_settings(config)
     cam = scene.cameras[i]
     if res == "train":
         return train_camera(cam, (config.get("train") or {}).get("max_width"))
     if protocol == "lerf":
         w, h = scene.label_sizes.get(i, (cam.width, cam.height))
     else:
+        down, _ = ovs3d_downsample(scene, config)
         w, h = max(1, cam.width // down), max(1, cam.height // down)
     return cam if (w, h) == (cam.width, cam.height) else cam.resized(w, h)
 
@@ -90,4 +106,5 @@ def size_text(cams) -> str:
     return ", ".join(sizes)
 
 
-__all__ = ["FRAME_SETS", "FrameSets", "frame_sets", "segmentation_camera", "train_camera", "view_name"]
+__all__ = ["FRAME_SETS", "FrameSets", "frame_sets", "ovs3d_downsample", "segmentation_camera", "train_camera",
+           "view_name"]

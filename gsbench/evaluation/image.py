@@ -1,14 +1,16 @@
 """Reconstruction metrics (PSNR, SSIM, LPIPS) on the held-out views, and the render FPS.
 
-Like 3DGS's metrics script, all three are computed on the 8-bit values a saved render holds
-(`quantize_uint8` of the render and of the GT); the ids say so. LPIPS's input range is
-`eval.lpips_input` and is part of its id.
+Like 3DGS's metrics script, all of them are computed on the 8-bit values a saved render holds
+(`quantize_uint8` of the render and of the GT); the ids say so. The GT is brought to the render's
+size as training loads it (PIL bicubic, `gsbench.datasets.imageio.resize_rgb`).
+`ssim` and `lpips` are the 3DGS forms that 3DGS-family papers report (zero-padded SSIM; LPIPS fed
+the [0, 1] images); `ssim_valid` and `lpips_package` keep the valid-region SSIM and the LPIPS
+package's [-1, 1] input convention. Each id names its form.
 """
 from __future__ import annotations
 
 import logging
 
-import cv2
 import numpy as np
 
 from gsbench.errors import InputError
@@ -18,55 +20,59 @@ from .frames import size_text, view_name
 
 log = logging.getLogger(__name__)
 QUANTIZED = "+uint8-input"
+SSIM_FORMS = {"ssim": "zeropad", "ssim_valid": "valid"}
+LPIPS_FORMS = {"lpips": "3dgs-[0,1]", "lpips_package": "lpips-[-1,1]"}
 
 
 def resize_image(img: np.ndarray, width: int, height: int) -> np.ndarray:
-    """A GT image at the evaluation size (area averaging, as training loads it)."""
-    if img.shape[1] == width and img.shape[0] == height:
-        return img
-    return cv2.resize(img.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA)
+    """A GT image at the evaluation size, resized as training loads it (3DGS's PIL bicubic on 8 bits)."""
+    from gsbench.datasets.imageio import resize_rgb
+    return resize_rgb(np.asarray(img, np.float32)[..., :3], width, height)
 
 
 def image_metrics(method, scene, ids: list[int], cams: list, config: dict, progress: bool = False) -> Block:
-    """PSNR / SSIM / LPIPS of the renders of views `ids` (cameras `cams`) against their images."""
+    """PSNR / SSIM / LPIPS (both forms of each) of the renders of views `ids` (cameras `cams`)."""
     from tqdm import tqdm
 
     from gsbench.metrics import image as MI
     from gsbench.metrics import perceptual as MP
     out = Block()
+    names_all = ("psnr", *SSIM_FORMS, *LPIPS_FORMS)
     if not ids:
-        out.skip(("psnr", "ssim", "lpips"), "no held-out view (train.holdout: none trains on every view)")
+        out.skip(names_all, "no held-out view (train.holdout: none trains on every view)")
         return out
-    ev = config.get("eval") or {}
-    net = ev.get("lpips_net", "vgg")
-    rng = ev.get("lpips_input", MP.LPIPS_DEFAULT_RANGE)
-    if rng not in MP.LPIPS_RANGES:   # a config error, not a skip: checked before any render
-        raise InputError(f"eval.lpips_input must be one of {', '.join(MP.LPIPS_RANGES)}, got {rng!r}")
+    net = (config.get("eval") or {}).get("lpips_net", "vgg")
     names = [view_name(scene, i) for i in ids]
-    vals: dict[str, list] = {"psnr": [], "ssim": [], "lpips": []}
-    lpips_reason, lpips_impl = None, None
+    vals: dict[str, list] = {k: [] for k in names_all}
+    lpips_reason = None
+    lpips_impls: dict[str, str] = {}
     for i, cam in tqdm(list(zip(ids, cams)), desc="eval views", disable=not progress):
         pred = MI.quantize_uint8(np.clip(to_numpy(method.render(cam).rgb), 0.0, 1.0))
         gt = MI.quantize_uint8(resize_image(scene.image(i), cam.width, cam.height))
         vals["psnr"].append(MI.psnr(pred, gt))
-        vals["ssim"].append(MI.ssim(pred, gt))
-        if lpips_reason is None:
+        for name, border in SSIM_FORMS.items():
+            vals[name].append(MI.ssim(pred, gt, border=border))
+        for name, rng in LPIPS_FORMS.items():
+            if lpips_reason is not None:
+                break
             try:
                 r = MP.lpips(pred, gt, net=net, input_range=rng)
             except InputError as e:     # e.g. image smaller than LPIPS's 32 px minimum
                 lpips_reason = str(e)
-                continue
+                break
             if r.value is None:
                 lpips_reason = r.reason or "n/a (no LPIPS weights)"
             else:
-                vals["lpips"].append(r.value)
-                lpips_impl = r.impl + QUANTIZED
+                vals[name].append(r.value)
+                lpips_impls[name] = r.impl + QUANTIZED
     out.put_mean("psnr", vals["psnr"], MI.PSNR_IMPL[True], names)
-    out.put_mean("ssim", vals["ssim"], MI.SSIM_IMPL["valid"] + QUANTIZED, names)
-    if lpips_reason is not None:
-        out.put("lpips", None, MP.lpips_impl(net, input_range=rng) + QUANTIZED, lpips_reason)
-    else:
-        out.put_mean("lpips", vals["lpips"], lpips_impl, names)
+    for name, border in SSIM_FORMS.items():
+        out.put_mean(name, vals[name], MI.SSIM_IMPL[border] + QUANTIZED, names)
+    for name, rng in LPIPS_FORMS.items():
+        if lpips_reason is not None:
+            out.put(name, None, MP.lpips_impl(net, input_range=rng) + QUANTIZED, lpips_reason)
+        else:
+            out.put_mean(name, vals[name], lpips_impls[name], names)
     out.frames["reconstruction"] = names
     out.resolution["reconstruction"] = size_text(cams)
     return out

@@ -67,6 +67,14 @@ def class_masks(scene, i: int, classes: list[str], width: int, height: int) -> O
     return {c: gt == k for k, c in enumerate(classes)}
 
 
+def check_aspect(path: Path, pw: int, ph: int, w: int, h: int, what: str) -> None:
+    """A prediction may be scored at another size than the GT, not at another aspect ratio: the GT
+    resized to it would be stretched. One pixel of rounding per side is allowed (as in a floor /
+    round of w*s x h*s)."""
+    if abs(pw * h - ph * w) > w + h:
+        raise InputError(f"{path}: prediction size {pw}x{ph} has another aspect ratio than {what} ({w}x{h})")
+
+
 def read_mask(path: Path) -> np.ndarray:
     """First channel of a mask PNG as stored."""
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -83,9 +91,16 @@ def query_file(query: str) -> str:
 
 
 def lerf_label_files(layout_dir: Path) -> list[Path]:
+    """The frame_*.json label files of a LERF-OVS label folder (the names the scene reader takes too).
+
+    A scene folder given instead of its label folder is named as such, with where its labels are."""
     files = sorted(layout_dir.glob("frame_*.json"))
-    if not files:
-        files = sorted(p for p in layout_dir.glob("*.json") if p.name != "results.json")
-    if not files:
-        raise InputError(f"{layout_dir}: no LERF-OVS label files (frame_*.json)")
-    return files
+    if files:
+        return files
+    nested = sorted({p.parent for p in layout_dir.glob("label/*/frame_*.json")})
+    if nested:
+        where = f"this looks like a scene folder; its labels are in {', '.join(str(d) for d in nested)}"
+    else:
+        where = ("LERF-OVS label files usually sit in <scene>/label/<scene name>/ "
+                 "(LangSplat's release: lerf_ovs/label/<scene>/)")
+    raise InputError(f"{layout_dir}: holds no frame_*.json label files; {where}")

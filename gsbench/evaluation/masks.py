@@ -5,7 +5,8 @@ Folder formats:
          <view> = the segmentations/<idx> folder name or the stem of the idx-th sorted image;
   lerf:  <pred>/<frame_stem>/<query>.png (non-zero = query), '/' in a query written as '_'.
 The GT (LERF polygons rasterised at the label size, 3D-OVS masks) is resized to the prediction's
-size by centre sampling (PIL NEAREST's rule). A missing prediction counts as IoU 0 and is listed (count + names).
+size by centre sampling (PIL NEAREST's rule); a prediction of another aspect ratio is refused.
+A missing prediction counts as IoU 0 and is listed (count + names).
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from gsbench.metrics import NEAREST_IMPL, resize_nearest
 from gsbench.results import run_results
 
 from .block import Block
-from .labels import label_masks, lerf_label_files, query_file, read_label_file, read_mask
+from .labels import check_aspect, label_masks, lerf_label_files, query_file, read_label_file, read_mask
 
 MASK_FOLDER_IMPL = "mask-folder/v2"
 MISSING_POLICY = "a missing prediction counts as IoU 0 (and BIoU 0) and is listed"
@@ -90,6 +91,7 @@ def score_lerf_folder(pred_dir: Path, layout_dir: Path, ratio: float) -> tuple[B
         if len(shapes) > 1:
             raise InputError(f"{pred_dir / lf.stem}: prediction masks of one frame differ in size {sorted(shapes)}")
         ph, pw = shapes.pop() if shapes else (h, w)
+        check_aspect(pred_dir / lf.stem, pw, ph, w, h, f"the label file {lf.name}")
         sizes.add(f"{pw}x{ph}")
         gt_masks, _ = label_masks(objects, w, h, pw, ph)
         ious = []
@@ -155,7 +157,8 @@ def score_3dovs_folder(pred_dir: Path, layout_dir: Path, ratio: float) -> tuple[
         pred_files, label_map, src = None, None, None
         for s in stems:
             if (pred_dir / s).is_dir():
-                pred_files = {c: pred_dir / s / f"{c}.png" for c in classes}
+                src = pred_dir / s
+                pred_files = {c: src / f"{c}.png" for c in classes}
                 break
             if (pred_dir / f"{s}.png").exists():
                 src = pred_dir / f"{s}.png"
@@ -180,7 +183,9 @@ def score_3dovs_folder(pred_dir: Path, layout_dir: Path, ratio: float) -> tuple[
         shapes = {p.shape for p in preds.values()}
         if len(shapes) > 1:
             raise InputError(f"{pred_dir / stems[0]}: prediction masks of one view differ in size {sorted(shapes)}")
-        ph, pw = shapes.pop() if shapes else next(iter(gt.values())).shape
+        gh, gw = next(iter(gt.values())).shape
+        ph, pw = shapes.pop() if shapes else (gh, gw)
+        check_aspect(src, pw, ph, gw, gh, f"the GT masks of view {vd.name}")
         sizes.add(f"{pw}x{ph}")
         stack = np.stack([resize_nearest(gt[c], pw, ph) for c in classes])
         ious, bious = [], []

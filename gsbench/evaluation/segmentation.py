@@ -13,7 +13,7 @@ from gsbench.errors import InputError
 from gsbench.results import FRAME_SET_SUFFIX, QUERY_MODES, SEG_BASES, seg_metric
 
 from .block import Block, to_numpy
-from .frames import segmentation_camera, size_text, view_name
+from .frames import eval_settings, ovs3d_downsample, segmentation_camera, size_text, view_name
 from .labels import class_masks, scene_label_masks
 
 log = logging.getLogger(__name__)
@@ -89,16 +89,21 @@ def score_3dovs(method, scene, ids: list[int], config: dict, mode: str, configur
     impl = f"{r.impl}+{ovs3d.PIXEL_ACC_IMPL['reference']}"
     vals = {"miou": (r.miou, r.impl), "mbiou": (r.mbiou, r.impl), "pixel_acc": (r.pixel_acc, impl),
             "pixel_acc_labelled": (r.pixel_acc_labelled, f"{r.impl}+{ovs3d.PIXEL_ACC_IMPL['labelled']}")}
+    res, _ = eval_settings(config)
+    down, why = ovs3d_downsample(scene, config)
+    size_tag = f"+size-1/{down}" if res == "reference" else "+size-train"
     for base, (value, base_impl) in vals.items():
         pv = [v[base] for v in r.per_view]
         reason = "no view with a GT pixel (labelled pixel accuracy undefined)" if value is None else None
         for n in names[base]:
-            out.put(n, value, f"{base_impl}+query-{mode}", reason, per_view=pv)
+            out.put(n, value, f"{base_impl}{size_tag}+query-{mode}", reason, per_view=pv)
     if r.skipped:
         out.notes[f"3dovs_{mode}{FRAME_SET_SUFFIX[frame_set]}_views"] = "; ".join(
             f"{s['view']}: {s['reason']}" for s in r.skipped)
     out.frames[f"3dovs/{frame_set}"] = [v.name for v in views]
     out.resolution[f"3dovs/{frame_set}"] = size_text(cams)
+    if res == "reference":
+        out.notes["3dovs_size"] = f"1/{down} of the {size_text([scene.cameras[i] for i in ids])} images ({why})"
     return out
 
 

@@ -66,10 +66,11 @@ def metric_cases() -> list[Case]:
             lambda: M.ssim(np.full((16, 16, 3), 0.3), np.full((16, 16, 3), 0.3)), 1.0, 1e-9,
             "(2mu^2+C1)/(2mu^2+C1) = 1")),
         Case(comp, "ssim constant 0.5 vs 0 (valid)", value_case(
-            lambda: M.ssim(c5, np.zeros_like(c5)), (0.01 ** 2) / (0.25 + 0.01 ** 2), 1e-6,
+            lambda: M.ssim(c5, np.zeros_like(c5), border="valid"), (0.01 ** 2) / (0.25 + 0.01 ** 2), 1e-6,
             "C1 / (mu^2 + C1), sigma = 0")),
         Case(comp, "ssim 1x1 images (valid border)", raises_case(
-            lambda: M.ssim(np.full((1, 1, 3), .3), np.full((1, 1, 3), .3)), "valid border needs >= 11x11")),
+            lambda: M.ssim(np.full((1, 1, 3), .3), np.full((1, 1, 3), .3), border="valid"),
+            "valid border needs >= 11x11")),
         Case(comp, "ssim 1x1 identical (zeropad border)", value_case(
             lambda: M.ssim(np.full((1, 1, 3), .3), np.full((1, 1, 3), .3), border="zeropad"), 1.0, 1e-9)),
         Case(comp, "ssim float32 vs float64", prec_case(lambda a, b: M.ssim(a, b), img_a, img_b, 1e-5)),
