@@ -191,8 +191,9 @@ def test_gaussiands_lifts_class_masks_to_held_out_views(tmp_path):
     from gsbench.runs import train_run
     from gsbench.store import read_json, read_jsonl
     root = real_layout(tmp_path / "ovs", "3dovs", EVEN, resolution=(48, 36))
+    # a real capture is scored at the 3D-OVS reference's 1/8 by default; this one is 48x36 already, so 1
     cfg = load_config("gaussiands", "cpu-small", ["priors.masks.provider=gt", "train.iterations=200",
-                                                  "train.eval_every=0"])
+                                                  "train.eval_every=0", "eval.ovs3d_downsample=1"])
     run = train_run(cfg, root, tmp_path / "run", progress=False)
     res = evaluate_run(run, progress=False)
     scene = load_scene(root)
