@@ -115,7 +115,7 @@ class Method:
         feats = self.render(camera).features
         if mode == "encode":
             return feats
-        with torch.no_grad():   # in row chunks: the decoder's hidden layers at once would be ~4 KB per pixel
+        with torch.no_grad():   # in row chunks: the decoder's last layers hold ~3 KB per pixel at once
             flat = feats.reshape(-1, feats.shape[-1])
             first = self.autoencoder.decode(flat[:DECODE_CHUNK])
             if flat.shape[0] <= DECODE_CHUNK:
