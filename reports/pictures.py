@@ -284,6 +284,8 @@ def pictures_html(res: Results, out_dir: Path, notes: list[str]) -> tuple[str, l
         parts.append(f"<h3>Scene {e(scene)}</h3>" + _provenance(sruns))
         frames: dict[tuple, list] = {}
         for run in sruns:
+            for topic, text in sorted((run.manifest.get("notes") or {}).items()):
+                notes.append(f"Pictures: {run.method} on {scene}: {topic}: {text}")
             for en in run.manifest["frames"]:
                 key = (en["protocol"], en["view"], tuple(en["scored_size"]))
                 try:
