@@ -47,20 +47,15 @@ __all__ = ["make_scene", "parse_resolution", "compose", "render_view", "trace", 
 
 
 # ------------------------------------------------------------------------------------ writing
-def _sample_points(spec: SceneSpec, renders: list[dict], ids: list[int], n: int, rng: np.random.Generator):
-    """Surface points back-projected from the GT depth of the given views, coloured by the image."""
-    pts, cols = [], []
-    per = max(1, n // max(len(ids), 1))
-    for i in ids:
-        cam, r = spec.cameras[i], renders[i]
-        valid = np.flatnonzero(r["depth"].ravel() > 0)
-        if not len(valid):
-            continue
-        pick = rng.choice(valid, size=min(per, len(valid)), replace=False)
-        o, D = camera_rays(cam)
-        pts.append(o + r["depth"].ravel()[pick, None] * D[pick])
-        cols.append(r["rgb"].reshape(-1, 3)[pick])
-    return np.concatenate(pts), np.concatenate(cols)
+def _sample_points(cam, rgb: np.ndarray, depth: np.ndarray, per: int, rng: np.random.Generator):
+    """`per` surface points back-projected from one view's GT depth, coloured by its image (None when
+    the view sees no surface). Called view by view, so no more than one view is ever held."""
+    valid = np.flatnonzero(depth.ravel() > 0)
+    if not len(valid):
+        return None
+    pick = rng.choice(valid, size=min(per, len(valid)), replace=False)
+    o, D = camera_rays(cam)
+    return o + depth.ravel()[pick, None] * D[pick], rgb.reshape(-1, 3)[pick]
 
 
 def _label_json(name: str, W: int, H: int, cmap: np.ndarray, classes: list[str], label_classes: list[str]) -> dict:
@@ -81,8 +76,10 @@ def _label_json(name: str, W: int, H: int, cmap: np.ndarray, classes: list[str],
 
 
 def make_scene(preset: str, out: Path, seed: int = 0, views: int | None = None,
-               resolution: tuple[int, int] | None = None, layout: str = "both", progress: bool = False) -> Path:
-    """Render a preset into `out` (a new or empty folder). The folder appears whole (temp + rename)."""
+               resolution: tuple[int, int] | None = None, layout: str = "both", progress: bool = False,
+               points: int | None = None) -> Path:
+    """Render a preset into `out` (a new or empty folder). The folder appears whole (temp + rename).
+    `points`: the number of sparse points (default: the preset's)."""
     from tqdm import tqdm
 
     if layout not in LAYOUT_CHOICES:
@@ -95,7 +92,10 @@ def make_scene(preset: str, out: Path, seed: int = 0, views: int | None = None,
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
-        _write(spec, tmp, preset, preset, seed, layout, rng, progress, tqdm)
+        n_points = int(PRESETS[preset]["points"] if points is None else points)
+        if n_points < 1:
+            raise InputError(f"points must be at least 1, got {n_points}")
+        _write(spec, tmp, preset, preset, seed, layout, rng, progress, tqdm, n_points)
         if out.exists():
             out.rmdir()
         os.replace(tmp, out)
@@ -106,7 +106,7 @@ def make_scene(preset: str, out: Path, seed: int = 0, views: int | None = None,
 
 
 def _write(spec: SceneSpec, root: Path, scene_name: str, preset: str, seed: int, layout: str,
-           rng: np.random.Generator, progress: bool, tqdm) -> None:
+           rng: np.random.Generator, progress: bool, tqdm, n_points: int) -> None:
     cams = spec.cameras
     n = len(cams)
     names = [c.name for c in cams]
@@ -117,11 +117,22 @@ def _write(spec: SceneSpec, root: Path, scene_name: str, preset: str, seed: int,
     for k, v in spec.instance_classes.items():
         lut[k] = v
     label_classes = [c for c in classes if c not in ("floor", "wall")]
-    renders = []
+    train = [i for i in range(n) if i % 8 != 0]
+    test = [i for i in range(n) if i % 8 == 0]
+    per = max(1, n_points // max(len(train), 1))
+    pts, cols, bounds, near, far = [], [], [], np.inf, -np.inf
     for i in tqdm(range(n), desc="make-scene", disable=not progress):
         traced = trace(spec, cams[i])
         r = render_view(spec, cams[i], traced=traced)
-        renders.append({"rgb": r["rgb"], "depth": r["depth"]})
+        d = r["depth"][r["depth"] > 0]
+        bounds.append([0.9 * float(d.min()), 1.1 * float(d.max())] if d.size else [0.1, FAR])
+        if d.size:
+            near, far = min(near, float(d.min())), max(far, float(d.max()))
+        if i in train:
+            got = _sample_points(cams[i], r["rgb"], r["depth"], per, rng)
+            if got is not None:
+                pts.append(got[0])
+                cols.append(got[1])
         write_png(root / "images" / names[i], r["rgb"], atomic=False)
         write_npy(root / "gt" / "depth" / f"{stems[i]}.npy", r["depth"], atomic=False)
         write_png(root / "gt" / "instances" / f"{stems[i]}.png", (r["instances"] + 1).astype(np.uint16), atomic=False)
@@ -139,22 +150,14 @@ def _write(spec: SceneSpec, root: Path, scene_name: str, preset: str, seed: int,
         if layout in ("both", "lerf"):
             write_json_atomic(root / "label" / scene_name / f"{stems[i]}.json",
                               _label_json(names[i], W, H, cmap, classes, label_classes))
-    train = [i for i in range(n) if i % 8 != 0]
-    test = [i for i in range(n) if i % 8 == 0]
-    pts, cols = _sample_points(spec, renders, train, PRESETS[preset]["points"], rng)
-    write_colmap(root / "sparse" / "0", cams, names, pts, cols, binary=True)
+    write_colmap(root / "sparse" / "0", cams, names, np.concatenate(pts), np.concatenate(cols), binary=True)
     if layout in ("both", "3dovs"):
         (root / "segmentations").mkdir(parents=True, exist_ok=True)
         (root / "segmentations" / "classes.txt").write_text("\n".join(classes) + "\n", encoding="utf-8")
-        bounds = []
-        for r in renders:
-            d = r["depth"][r["depth"] > 0]
-            bounds.append([0.9 * float(d.min()), 1.1 * float(d.max())] if d.size else [0.1, FAR])
         write_poses_bounds(root / "poses_bounds.npy", cams, np.array(bounds))
-    all_d = np.concatenate([r["depth"][r["depth"] > 0] for r in renders])
     meta = {
         "format": "gsbench-synthetic", "version": GENERATOR_VERSION,
-        "near": float(all_d.min()), "far": float(all_d.max()),
+        "near": near, "far": far,
         "generator": {"preset": preset, "seed": seed, "views": n, "resolution": [W, H], "layout": layout},
         "image_names": names, "train_ids": train, "test_ids": test,
         "class_names": classes, "queries": label_classes,

@@ -176,6 +176,8 @@ RULES: dict[str, Rule] = {
     "eval.fps_warmup": at_least(0),
     "eval.fps_repeats": at_least(1),
     "eval.boundary_dilation_ratio": unit(),
+    "eval.previews": at_least(0, integer=True),   # labelled frames per protocol saved as pictures (0 = none)
+    "eval.preview_width": at_least(16, integer=True),
 }
 
 # Leaves whose value is a free-form mapping handed to a library as is (not split into keys).

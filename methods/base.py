@@ -35,6 +35,7 @@ from gsbench.store import load_torch, save_torch_atomic
 
 QUERY_MODES = ("encode", "decode")
 MODEL_FILE = "model.pt"
+DECODE_CHUNK = 1 << 18   # pixels decoded at once (images up to 512 x 512 in one piece)
 
 
 def _unit(x: torch.Tensor) -> torch.Tensor:
@@ -121,9 +122,16 @@ class Method:
         feats = self.render(camera).features
         if mode == "encode":
             return feats
-        with torch.no_grad():
+        with torch.no_grad():   # in row chunks: the decoder's last layers hold ~3 KB per pixel at once
             flat = feats.reshape(-1, feats.shape[-1])
-            return self.autoencoder.decode(flat).reshape(feats.shape[0], feats.shape[1], -1)
+            first = self.autoencoder.decode(flat[:DECODE_CHUNK])
+            if flat.shape[0] <= DECODE_CHUNK:
+                return first.reshape(feats.shape[0], feats.shape[1], -1)
+            out = torch.empty(flat.shape[0], first.shape[1], dtype=first.dtype, device=first.device)
+            out[:DECODE_CHUNK] = first
+            for k in range(DECODE_CHUNK, flat.shape[0], DECODE_CHUNK):
+                out[k:k + DECODE_CHUNK] = self.autoencoder.decode(flat[k:k + DECODE_CHUNK])
+            return out.reshape(feats.shape[0], feats.shape[1], -1)
 
     def feature_provider(self):
         if self._feature_provider is None:

@@ -16,6 +16,7 @@ import pandas as pd
 from gsbench.collect import collect, read_collected, write_collected
 from gsbench.errors import InputError
 from gsbench.reports import html as html_mod
+from gsbench.reports import pictures as pictures_mod
 from gsbench.reports import plots, shares
 
 from gsbench.reports.ablations import (depth_formulation_table, latent_diff_table, loss_subsets_table,  # isort: skip
@@ -40,6 +41,7 @@ _SECTION_TITLES = {
     **{k: v for k, v in STUDIES.items() if k != "reconstruction"},
     "claims": "Paper claims: reproduced or not",
     "budgets": "Training budget per method",
+    "pictures": "Pictures: renders, depth and masks per scene and method",
 }
 _NO_BARS = ("latent_dim", "lambda_pearson", "paper_claims", "budgets")
 
@@ -50,6 +52,7 @@ class ReportSummary:
     index: Path
     tables: list[str] = field(default_factory=list)
     plots: list[Path] = field(default_factory=list)
+    pictures: list[Path] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     collected: Path | None = None
     unreadable: int = 0          # results.json files that could not be read (each a failed run row)
@@ -212,7 +215,11 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         for f in sorted(full)[:5]:
             summary.notes.append(f"n/a ({short}) in full: {f}")
 
-    order = ["main", "budgets", "claims"] + [k for k in STUDIES if k != "reconstruction"]
+    block, pictures = pictures_mod.pictures_html(res, out_dir, summary.notes)
+    if block:
+        section("pictures").blocks.append(block)
+        summary.pictures = pictures
+    order = ["main", "pictures", "budgets", "claims"] + [k for k in STUDIES if k != "reconstruction"]
     ordered = [sections[k] for k in order if k in sections] + [s for k, s in sections.items() if k not in order]
     links = [("tables.md", "tables (Markdown)"), ("tables.tex", "tables (LaTeX)"),
              (summary.collected.name, f"collected results ({summary.collected.suffix[1:]})")]

@@ -25,6 +25,7 @@ class Section:
     tables: list[Table] = field(default_factory=list)
     figures: list[tuple[str, str]] = field(default_factory=list)  # (relative path, caption)
     notes: list[str] = field(default_factory=list)
+    blocks: list[str] = field(default_factory=list)  # ready HTML (the pictures), placed after the figures
 
 
 def _template() -> Template:
@@ -149,6 +150,7 @@ def write_index(path: Path, title: str, source: str, generated: str, sections: l
             body.append(f'<div class="tablewrap">{t.to_html()}</div>')
         for src, cap in s.figures:
             body.append(f'<figure><img src="{e(src)}" alt="{e(cap)}"><figcaption>{e(cap)}</figcaption></figure>')
+        body += s.blocks
         for n in s.notes:
             body.append(f'<p class="note">{e(n)}</p>')
         body.append("</section>")

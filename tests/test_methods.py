@@ -102,6 +102,26 @@ def test_methods_without_semantics_return_none():
         m.semantic_features(cam, "bogus")
 
 
+def test_decoded_features_are_the_same_in_chunks(monkeypatch):
+    """Decode mode decodes in row chunks (memory at full size); chunking must not change any pixel."""
+    from gsbench.methods import base as B
+    from gsbench.render import RenderOutput
+    from gsbench.scene import Camera
+    m = get_method("gaussiands")()
+    m.field = _field(5)
+    torch.manual_seed(0)
+    m.autoencoder = FeatureAutoencoder(16, 3, (8, 4))
+    feats = torch.randn(12, 16, 3)
+    monkeypatch.setattr(m, "render", lambda cam: RenderOutput(torch.zeros(12, 16, 3), torch.zeros(12, 16), feats,
+                                                              torch.ones(12, 16)))
+    cam = Camera(np.array([[20.0, 0, 8], [0, 20, 6], [0, 0, 1]]), np.eye(4), 16, 12)
+    whole = m.autoencoder.decode(feats.reshape(-1, 3)).reshape(12, 16, 16)
+    monkeypatch.setattr(B, "DECODE_CHUNK", 7)          # 192 pixels in 28 chunks, the last one partial
+    chunked = m.semantic_features(cam, "decode")
+    assert chunked.shape == (12, 16, 16)
+    torch.testing.assert_close(chunked, whole, rtol=1e-6, atol=1e-6)
+
+
 def test_save_load_round_trip(tmp_path):
     m = get_method("gaussiands")()
     m.field = _field(7)

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from gsbench.errors import InputError
+from gsbench.metrics import ordering as MO
 from gsbench.priors import DepthPrior, Priors, prepare_priors
 from gsbench.priors import cache as C
 from gsbench.priors import depth as D
@@ -60,8 +61,9 @@ def test_not_needed_parts_are_none_and_recorded(scene):
 
 def test_second_call_reuses_the_cache(scene, tmp_path, monkeypatch):
     first = run(scene, tmp_path)
-    assert {k: v["hit"] for k, v in first.cache.items()} == {"depth": False, "masks": False, "features": False}
-    for part in ("depth", "masks", "features"):
+    assert {k: v["hit"] for k, v in first.cache.items()} == {"depth": False, "masks": False, "features": False,
+                                                              "mask-stats": False}
+    for part in ("depth", "masks", "features", "mask-stats"):
         entry = tmp_path / part / first.cache[part]["key"]
         assert (entry / "arrays.npz").is_file() and (entry / "meta.json").is_file()
     # no temp folders left behind
@@ -73,8 +75,12 @@ def test_second_call_reuses_the_cache(scene, tmp_path, monkeypatch):
     monkeypatch.setattr(D, "compute_depth", boom)
     monkeypatch.setattr(S, "segment_view", boom)
     monkeypatch.setattr(F.TextAlignedFeatures, "encode_masks", boom)
+    # the ordering statistics (optical flow and depth warps over every view pair) come from the cache too
+    monkeypatch.setattr(MO, "adjacent_mask_iou_flow", boom)
+    monkeypatch.setattr(MO, "adjacent_mask_iou", boom)
     second = run(scene, tmp_path)
     assert all(v["hit"] for v in second.cache.values())
+    assert second.stats == first.stats and second.skipped == first.skipped
     assert second.providers == first.providers and second.order == first.order
     for v in first.depth:
         assert np.array_equal(first.depth[v].values, second.depth[v].values)

@@ -53,4 +53,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"missing predictions: {res['missing']['count']} (counted as IoU 0): "
               + ", ".join(res["missing"]["files"][:10]) + (" ..." if res["missing"]["count"] > 10 else ""))
     print(f"wrote {Path(out) / 'results.json'}")
+    if args.masks is None:
+        from gsbench.previews import PREVIEWS_DIR, read_manifest
+        m = read_manifest(args.run_dir)
+        if m is not None:
+            print(f"wrote {Path(out) / PREVIEWS_DIR} ({len(m['frames'])} frames, {len(m['removal'])} removal views "
+                  "for the report's pictures)")
     return 0

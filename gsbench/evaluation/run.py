@@ -15,6 +15,7 @@ from gsbench.store import read_json, write_json_atomic
 from .block import Block
 from .frames import frame_sets, train_camera, view_name
 from .image import fps, image_metrics
+from .previews import save_previews
 from .removal import removal
 from .segmentation import query_mode, resolve_protocols, segmentation
 
@@ -127,6 +128,9 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
         "protocol": protocols[0] if protocols else None, "protocols": protocols, "query_mode": mode,
         "dropped": config.get("dropped", {}),
     }
+    with torch.no_grad():
+        pv = {k: identity[k] for k in ("run_id", "method", "scene", "providers", "backend")}
+        save_previews(run_dir, method, scene, protocols, sets, fs.reconstruction, rec_cams, config, mode, pv)
     results = run_results(identity=identity, metrics=out.metrics, metric_impl=out.metric_impl,
                           skipped=out.skipped, per_view=out.per_view,
                           view_names=out.frames.get("reconstruction", []), frames=out.frames,

@@ -162,6 +162,32 @@ def _compute_masks(scene, masks_cfg: Mapping, views, order, size, images: _Image
     return P.propagate(order, segs, warper, min_iou=min_iou, new_objects=rule, progress=progress), pid
 
 
+def _mask_stats(scene, views, order, size, masks, images: _Images, per_frame: bool) -> tuple[dict, dict]:
+    """The ordering study's adjacent mask IoUs of the masks in `order`, with a reason for each missing one."""
+    stats, skipped = {}, {}
+    strict_keys = ("ordering_adjacent_mask_iou", "ordering_adjacent_mask_iou_strict",
+                   "ordering_adjacent_mask_iou_flow")
+    if per_frame:
+        for k in strict_keys:
+            stats[k] = None
+            skipped[k] = "per-frame masks are not propagated"
+        return stats, skipped
+    stats["ordering_adjacent_mask_iou_flow"] = MO.adjacent_mask_iou_flow(
+        [masks[v] for v in order], [images[v] for v in order])
+    if not scene.has_depth:
+        for k in strict_keys[:2]:
+            stats[k] = None
+            skipped[k] = "the scene has no GT depth to warp masks between views (see the _flow variant)"
+    else:
+        gd, gv = _gt_depths(scene, views, size)
+        cams = [W.camera_at(scene.cameras[v], size) for v in order]
+        zs = [np.where(gv[v], gd[v], 0.0) for v in order]
+        ms = [masks[v] for v in order]
+        stats["ordering_adjacent_mask_iou"] = MO.adjacent_mask_iou(ms, zs, cams)
+        stats["ordering_adjacent_mask_iou_strict"] = MO.adjacent_mask_iou_strict(ms, zs, cams)
+    return stats, skipped
+
+
 def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tuple[int, int],
                    cache_dir: Path | None, need_depth: bool, need_masks: bool, need_features: bool,
                    per_frame_masks: bool = False, seed: int = 0, progress: bool = True,
@@ -274,27 +300,18 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
         stats["mask_tracks"] = int(len(ids))
         if from_labels:   # views without labels have no segment, hence no semantic target
             stats["mask_labelled_views"] = int(sum(bool((masks[v] >= 0).any()) for v in views))
-        # adjacent mask IoU of the propagated masks (the ordering study's second metric)
-        strict_keys = ("ordering_adjacent_mask_iou", "ordering_adjacent_mask_iou_strict",
-                       "ordering_adjacent_mask_iou_flow")
-        if per_frame_masks:
-            for k in strict_keys:
-                stats[k] = None
-                skipped[k] = "per-frame masks are not propagated"
+        # adjacent mask IoU of the propagated masks (the ordering study's second metric): optical flow
+        # and depth warps over every view pair, so cached too (keyed by the masks and the order)
+        skey = cache_key("mask-stats", mid, PIPELINE_VERSION, {"order": list(order)}, {"masks": mkey})
+        shit = cache.load("mask-stats", skey)
+        if shit is not None:
+            mstats, mskipped = shit[1]["stats"], shit[1]["skipped"]
         else:
-            stats["ordering_adjacent_mask_iou_flow"] = MO.adjacent_mask_iou_flow(
-                [masks[v] for v in order], [images[v] for v in order])
-            if not scene.has_depth:
-                for k in strict_keys[:2]:
-                    stats[k] = None
-                    skipped[k] = "the scene has no GT depth to warp masks between views (see the _flow variant)"
-            else:
-                gd, gv = _gt_depths(scene, views, size)
-                cams = [W.camera_at(scene.cameras[v], size) for v in order]
-                zs = [np.where(gv[v], gd[v], 0.0) for v in order]
-                ms = [masks[v] for v in order]
-                stats["ordering_adjacent_mask_iou"] = MO.adjacent_mask_iou(ms, zs, cams)
-                stats["ordering_adjacent_mask_iou_strict"] = MO.adjacent_mask_iou_strict(ms, zs, cams)
+            mstats, mskipped = _mask_stats(scene, views, order, size, masks, images, per_frame_masks)
+            cache.save("mask-stats", skey, {}, {"stats": mstats, "skipped": mskipped})
+        stats.update(mstats)
+        skipped.update(mskipped)
+        cache_info["mask-stats"] = {"key": skey, "hit": shit is not None}
         bar.update(1)
     else:
         skipped["masks"] = "not needed by the method"

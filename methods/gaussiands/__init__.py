@@ -34,9 +34,11 @@ class GaussianDS(Method):
         dev = self._prepare(config)
         g = config["gaussiands"]
         use = uses(config)
+        # priors first: their working set (every image at the training size, flows) is freed before the
+        # training images are loaded, so the peak is the larger of the two, not their sum
+        pri = fit_priors(scene, config, run_dir, progress=progress)
         views, (W, H) = load_views(scene, config, device=dev)
         train_ids = sorted(views.cameras)
-        pri = fit_priors(scene, config, run_dir, progress=progress)
         self.providers = dict(pri.providers)
         self.info["priors_stats"] = dict(pri.stats)
         self.info["priors_skipped"] = dict(pri.skipped)
@@ -78,6 +80,9 @@ class GaussianDS(Method):
                 ok = torch.as_tensor(np.asarray(depth[v].valid, dtype=bool)) & torch.isfinite(vals)
                 dprior[v] = (torch.nan_to_num(vals, nan=0.0, posinf=0.0, neginf=0.0).to(dev), ok.to(dev), depth[v].kind)
         has_any = {v: bool(targets.has_target[v].any()) for v in train_ids} if targets is not None else {}
+        # the host copies of the priors are no longer needed: the targets, dprior and edges hold what training
+        # reads (at 1440x1080 the masks and depth maps of 175 views are about 2.5 GB)
+        del pri, depth
 
         lam = g["lambdas"]
         on = g["losses"]
@@ -95,9 +100,9 @@ class GaussianDS(Method):
             terms = {"rec": rec.detach()}
             weighted = {"rec": rec.detach()}
             skipped = {}
-            if (on["depth"] and depth is not None) or on["tv"]:
+            if (on["depth"] and dprior) or on["tv"]:
                 dn = normalised_depth(out.depth, out.alpha)     # scale-free: lambdas mean the same on every scene
-            if on["depth"] and depth is not None:
+            if on["depth"] and dprior:
                 vals, valid, kind = dprior[vid]
                 dt = depth_loss(form, dn, vals, valid, kind, min_valid)
                 if dt.loss is not None:

@@ -1,0 +1,213 @@
+"""The pictures of an evaluation: for a few labelled frames per protocol, the render, its depth and
+each query's predicted and GT mask, with the metrics of that frame; for removal, the render before
+and after. Saved in the run folder (contract: gsbench.previews) for the report to place.
+
+The masks and numbers come from the same metric functions as the scores in results.json, at the
+same camera (protocol, frame set, resolution, query mode), so a picture shows what was scored.
+The arrays are shrunk to `eval.preview_width` pixels wide for display only; the metrics are not.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from gsbench.metrics import resize_nearest
+from gsbench.previews import remove_previews, write_previews
+
+from .block import to_numpy
+from .frames import segmentation_camera, view_name
+from .image import resize_image
+from .labels import class_masks, scene_label_masks
+from .removal import REMOVAL_IMPL, removal_targets, view_removal_metrics
+
+log = logging.getLogger(__name__)
+DEFAULT_FRAMES = 2
+DEFAULT_WIDTH = 320
+
+
+def pick_frames(sets: dict[str, list[int]], n: int) -> list[tuple[int, str]]:
+    """n (view, frame set) pairs spread over the held-out frames (novel views) first, then the reference ones."""
+    out: list[tuple[int, str]] = []
+    for frame_set in ("held-out", "reference"):
+        ids = list(sets.get(frame_set, []))
+        want = min(n - len(out), len(ids))
+        if want <= 0:
+            continue
+        picks = [0] if want == 1 else [round(k * (len(ids) - 1) / (want - 1)) for k in range(want)]
+        out += [(ids[k], frame_set) for k in picks]
+    return out
+
+
+def _to_uint8(a: np.ndarray, w: int, h: int) -> np.ndarray:
+    a = np.clip(a, 0.0, 1.0).astype(np.float32)
+    if a.shape[:2] != (h, w):
+        a = cv2.resize(a, (w, h), interpolation=cv2.INTER_AREA)
+    return np.floor(a * 255.0 + 0.5).astype(np.uint8)
+
+
+def _shrink_masks(masks: list[np.ndarray], w: int, h: int) -> np.ndarray:
+    if not masks:
+        return np.zeros((0, h, w), np.uint8)
+    return np.stack([resize_nearest(np.asarray(m, bool), w, h) for m in masks]).astype(np.uint8)
+
+
+def _preview_size(w: int, h: int, max_width: int) -> tuple[int, int]:
+    if w <= max_width:
+        return w, h
+    return max_width, max(1, int(round(h * max_width / w)))
+
+
+def _depth_range(depth: np.ndarray, alpha: np.ndarray) -> list[float] | None:
+    """2nd and 98th percentile of the rendered depth where the render is opaque (alpha > 0.5)."""
+    d = depth[(alpha > 0.5) & np.isfinite(depth) & (depth > 0)]
+    if d.size == 0:
+        return None
+    return [float(np.percentile(d, 2)), float(np.percentile(d, 98))]
+
+
+def _semantics_3dovs(method, scene, i: int, cam, config: dict, mode: str, feats: np.ndarray) -> tuple:
+    from gsbench.metrics import ovs3d
+    classes = list(scene.class_names)
+    text = to_numpy(method.embed_text(classes, mode))
+    gt = class_masks(scene, i, classes, cam.width, cam.height) or {}
+    pred = ovs3d.ovs3d_predict(feats, text)
+    ratio = float((config.get("eval") or {}).get("boundary_dilation_ratio", 0.02))
+    m = ovs3d.ovs3d_view_metrics(pred, gt, classes, dilation_ratio=ratio)
+    queries = [{"query": c, "iou": m["iou"][c], "biou": m["biou"][c], "localized": None, "reason": None}
+               for c in classes]
+    gt_masks = [gt.get(c, np.zeros((cam.height, cam.width), bool)) for c in classes]
+    impl = {"iou": f"{ovs3d.OVS3D_IMPL}+query-{mode}"}
+    return queries, [pred == k for k in range(len(classes))], gt_masks, impl
+
+
+def _semantics_lerf(method, scene, i: int, cam, config: dict, mode: str, feats: np.ndarray) -> tuple:
+    from gsbench.metrics import lerf
+    masks, boxes = scene_label_masks(scene, i, cam.width, cam.height)
+    names = list(masks)
+    if not names:
+        return [], [], [], {}
+    kernels = lerf.lerf_kernels(cam.width, (config.get("eval") or {}).get("lerf_kernels", "auto"))
+    neg = to_numpy(method.embed_text(list(lerf.CANONICAL_NEGATIVES), mode))
+    rel = lerf.lerf_relevancy(feats, to_numpy(method.embed_text(names, mode)), neg)
+    pairs = [lerf.LerfPair(view_name(scene, i), q, rel[k], masks[q], boxes[q]) for k, q in enumerate(names)]
+    r = lerf.evaluate_lerf_scene(pairs, missing="error", kernels=kernels)
+    by_query = {p["query"]: p for p in r.per_pair}
+    reasons = {s["query"]: s["reason"] for s in r.skipped}
+    queries, preds = [], []
+    for k, q in enumerate(names):
+        blended = lerf.lerf_blend(rel[k], kernels.blend)
+        preds.append(lerf.lerf_mask(blended, radius=kernels.radius))
+        pp = by_query.get(q, {})
+        queries.append({"query": q, "iou": pp.get("iou"), "biou": None, "localized": pp.get("localized"),
+                        "reason": reasons.get(q)})
+    return queries, preds, [masks[q] for q in names], {"iou": f"{r.impl}+query-{mode}"}
+
+
+def frame_preview(method, scene, i: int, protocol: str, frame_set: str, config: dict, mode: str,
+                  max_width: int) -> tuple[dict, dict]:
+    """(manifest entry, arrays) of labelled view i under `protocol`."""
+    from gsbench.metrics import image as MI
+    cam = segmentation_camera(scene, i, protocol, config)
+    out = method.render(cam)
+    rgb = np.clip(to_numpy(out.rgb), 0.0, 1.0)
+    depth, alpha = to_numpy(out.depth).astype(np.float32), to_numpy(out.alpha).astype(np.float32)
+    gt = resize_image(scene.image(i), cam.width, cam.height)
+    w, h = _preview_size(cam.width, cam.height, max_width)
+    entry = {"key": f"{protocol}_{Path(view_name(scene, i)).stem}", "protocol": protocol,
+             "view": view_name(scene, i), "frame_set": frame_set, "scored_size": [cam.width, cam.height],
+             "size": [w, h], "psnr": MI.psnr(MI.quantize_uint8(rgb), MI.quantize_uint8(gt)),
+             "psnr_impl": MI.PSNR_IMPL[True], "depth_range": _depth_range(depth, alpha),
+             "semantic_reason": None, "metric_impl": {}, "queries": []}
+    preds: list = []
+    gts: list = []
+    feats = method.semantic_features(cam, mode)
+    if feats is None:
+        entry["semantic_reason"] = f"method {config.get('method')} has no semantic field"
+    else:
+        fn = _semantics_3dovs if protocol == "3dovs" else _semantics_lerf
+        entry["queries"], preds, gts, entry["metric_impl"] = fn(method, scene, i, cam, config, mode, to_numpy(feats))
+        if not entry["queries"]:
+            entry["semantic_reason"] = "the label file holds no query"
+    gt_depth = scene.gt_depth(i)
+    gt_depth = (np.zeros((0, 0), np.float16) if gt_depth is None else
+                cv2.resize(np.nan_to_num(np.asarray(gt_depth, np.float32)), (w, h),
+                           interpolation=cv2.INTER_NEAREST).astype(np.float16))
+    arrays = {"render": _to_uint8(rgb, w, h), "gt": _to_uint8(gt, w, h), "gt_depth": gt_depth,
+              "depth": cv2.resize(depth, (w, h), interpolation=cv2.INTER_NEAREST).astype(np.float16),
+              "alpha": _to_uint8(alpha, w, h),
+              "pred": _shrink_masks(preds, w, h),
+              "gt_masks": _shrink_masks(gts, w, h)}
+    entry["file"] = f"{entry['key']}.npz"
+    return entry, arrays
+
+
+def removal_previews(method, scene, ids: list[int], cams: list, config: dict, n: int,
+                     max_width: int) -> tuple[list[dict], dict, str | None]:
+    """Before / after renders of the first removable object on up to n held-out views where it is
+    visible, with that view's removal metrics; or a reason when there is nothing to show."""
+    if not (scene.has_removal and scene.has_instances and scene.instance_classes):
+        return [], {}, "scene has no removal ground truth (synthetic scenes only)"
+    if method.embed_text(["object"], "encode") is None:
+        return [], {}, f"method {config.get('method')} has no semantic field to select objects"
+    threshold = float((config.get("removal") or {}).get("threshold", 0.9))
+    for name, inst in removal_targets(scene):
+        shown = []
+        for i, cam in zip(ids, cams):
+            inst_map, gt_rm = scene.gt_instances(i), scene.removed_image(i, inst)
+            if inst_map is None or gt_rm is None:
+                continue
+            obj = resize_nearest(np.asarray(inst_map, np.int32) == inst, cam.width, cam.height)
+            if obj.any():
+                shown.append((i, cam, obj, resize_image(gt_rm, cam.width, cam.height)))
+            if len(shown) == n:
+                break
+        if not shown:
+            continue
+        removed, n_pruned = method.remove(name, threshold)
+        entries, arrays = [], {}
+        for i, cam, obj, gt_rm in shown:
+            before = np.clip(to_numpy(method.render(cam).rgb), 0.0, 1.0)
+            after = np.clip(to_numpy(removed.render(cam).rgb), 0.0, 1.0)
+            res, ps = view_removal_metrics(after, gt_rm, obj)
+            w, h = _preview_size(cam.width, cam.height, max_width)
+            key = f"removal_{Path(view_name(scene, i)).stem}"
+            entries.append({"key": key, "file": f"{key}.npz", "view": view_name(scene, i), "query": name,
+                            "n_pruned": n_pruned, "threshold": threshold, "residual": res, "psnr_outside": ps,
+                            "impl": REMOVAL_IMPL, "size": [w, h], "scored_size": [cam.width, cam.height]})
+            arrays[key] = {"before": _to_uint8(before, w, h), "after": _to_uint8(after, w, h),
+                           "gt_after": _to_uint8(gt_rm, w, h),
+                           "object": _shrink_masks([obj], w, h)[0]}
+        return entries, arrays, None
+    return [], {}, "no single-instance class visible in the held-out views"
+
+
+def preview_settings(config: dict) -> tuple[int, int]:
+    """(frames per protocol, max width) from eval.previews / eval.preview_width."""
+    ev = config.get("eval") or {}
+    return int(ev.get("previews", DEFAULT_FRAMES)), int(ev.get("preview_width", DEFAULT_WIDTH))
+
+
+def save_previews(run_dir: Path, method, scene, protocols: list[str], sets: dict, rec_ids: list[int],
+                  rec_cams: list, config: dict, mode: str, identity: dict) -> Path | None:
+    """Write run_dir/previews for this evaluation (none, and the old ones deleted, when eval.previews is 0)."""
+    n, max_width = preview_settings(config)
+    if n <= 0:
+        remove_previews(run_dir)
+        return None
+    frames, arrays = [], {}
+    for p in protocols:
+        for i, frame_set in pick_frames(sets[p], n):
+            entry, arrs = frame_preview(method, scene, i, p, frame_set, config, mode, max_width)
+            frames.append(entry)
+            arrays[entry["key"]] = arrs
+    removal, rarrays, rreason = removal_previews(method, scene, rec_ids, rec_cams, config, n, max_width)
+    arrays.update(rarrays)
+    notes = {} if protocols else {"frames": "no segmentation protocol evaluated: no labelled frame to show"}
+    manifest = {**identity, "query_mode": mode, "max_width": max_width, "frames": frames, "removal": removal,
+                "removal_reason": rreason, "notes": notes}
+    path = write_previews(run_dir, manifest, arrays)
+    log.info("previews: %d frames, %d removal views in %s", len(frames), len(removal), path)
+    return path
