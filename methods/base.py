@@ -111,12 +111,25 @@ class Method:
         _check_mode(mode)
         if not self.has_semantics:
             return None
+        return self.semantic_features_modes(camera, (mode,))[mode]
+
+    def semantic_features_modes(self, camera: Camera, modes: tuple) -> dict:
+        """{mode: semantic_features(camera, mode)} from one render; decoded only when "decode" is asked
+        (evaluation scores every query mode of a frame from this one render)."""
+        for m in modes:
+            _check_mode(m)
+        if not self.has_semantics:
+            return {m: None for m in modes}
         feats = self.render(camera).features
-        if mode == "encode":
-            return feats
-        with torch.no_grad():
-            flat = feats.reshape(-1, feats.shape[-1])
-            return self.autoencoder.decode(flat).reshape(feats.shape[0], feats.shape[1], -1)
+        out = {}
+        for m in modes:
+            if m == "encode":
+                out[m] = feats
+            else:
+                with torch.no_grad():
+                    flat = feats.reshape(-1, feats.shape[-1])
+                    out[m] = self.autoencoder.decode(flat).reshape(feats.shape[0], feats.shape[1], -1)
+        return out
 
     def feature_provider(self):
         if self._feature_provider is None:
