@@ -51,8 +51,13 @@ class FeatureAutoencoder(nn.Module):
         return _unit(y, inplace=not y.requires_grad)
 
     def decode(self, z: torch.Tensor) -> torch.Tensor:
-        y = self.decoder(z)
-        return _unit(y, inplace=not y.requires_grad)
+        if torch.is_grad_enabled() and (z.requires_grad or any(p.requires_grad for p in self.decoder.parameters())):
+            return _unit(self.decoder(z))
+        # no graph: the same layers with the ReLUs in place (one (N, width) buffer less per layer)
+        y = z
+        for layer in self.decoder:
+            y = torch.relu_(y) if isinstance(layer, nn.ReLU) else layer(y)
+        return _unit(y, inplace=True)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.decode(self.encode(x))
