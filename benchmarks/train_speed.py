@@ -15,7 +15,9 @@ method, all in the same process:
   it/s comes from train_log.jsonl (`wall_s`, the trainer's own step timer, synchronised at log steps),
   over the steps after the first log interval (warm-up: numba compile, caches, CUDA kernels).
   Priors, autoencoder and evaluation are outside the timed steps.
-Each harness row is also printed as a ratio to the reference row of the same device and size
+A second table gives each harness row's step in ms per phase (projection, raster forward, raster
+backward, losses, optimiser, densify, other; see `phase_ms`), from the gsbench.phases timers over
+the whole run. Each harness row is also printed as a ratio to the reference row of the same device and size
 (ratio = harness it/s / reference it/s) and gaussiands as a ratio to vanilla. Ratios are taken within
 one process on one machine; absolute it/s depend on the machine and its load.
 """
@@ -103,15 +105,42 @@ def reference_its(n: int, w: int, h: int, device: torch.device, iters: int, root
     return iters / (time.perf_counter() - t0), label
 
 
-def harness_its(method: str, n: int, w: int, h: int, device: torch.device, iters: int, root: Path) -> float:
+PHASES = ("projection", "raster fwd", "raster bwd", "losses", "optimiser", "densify", "other")
+
+
+def phase_ms(tot: dict, steps: int, step_s: float) -> dict:
+    """ms per step of each phase from gsbench.phases totals over `steps` steps of `step_s` seconds in all.
+
+    projection = forward + hand-written backward; losses = the loss terms plus the autograd backward
+    that is not the renderer's own (SSIM, L1, the loss terms' graph, SH colours); other = the rest of
+    the step (the field's assembly, render glue, bookkeeping)."""
+    g = lambda k: tot.get(k, 0.0)  # noqa: E731
+    ms = {"projection": g("projection") + g("projection_backward"), "raster fwd": g("raster_forward"),
+          "raster bwd": g("raster_backward"),
+          "losses": g("losses") + g("backward") - g("raster_backward") - g("projection_backward"),
+          "optimiser": g("optimiser"), "densify": g("densify")}
+    ms["other"] = step_s - sum(ms.values())
+    return {k: 1e3 * v / max(1, steps) for k, v in ms.items()}
+
+
+def harness_its(method: str, n: int, w: int, h: int, device: torch.device, iters: int,
+                root: Path) -> tuple[float, dict]:
+    """(it/s after the first log interval, ms per step of each phase over the whole run)."""
+    from gsbench import phases
     from gsbench.runs import train_run
     from gsbench.store import read_jsonl
     log_every = max(5, iters // 4)
     cfg = _config(method, n, w, device, iters + log_every, log_every, root)
-    run = train_run(cfg, _scene(root, w, h), root / f"{method}_{device.type}_{n}_{w}x{h}", progress=False)
+    phases.reset()
+    phases.enable()
+    try:
+        run = train_run(cfg, _scene(root, w, h), root / f"{method}_{device.type}_{n}_{w}x{h}", progress=False)
+    finally:
+        phases.enable(False)
     log = [r for r in read_jsonl(run / "train_log.jsonl") if "loss" in r]
     first, last = log[0], log[-1]
-    return (last["step"] - first["step"]) / max(1e-9, last["wall_s"] - first["wall_s"])
+    its = (last["step"] - first["step"]) / max(1e-9, last["wall_s"] - first["wall_s"])
+    return its, phase_ms(phases.totals(), last["step"], last["wall_s"])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -139,6 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, {a.iters} timed steps per row")
     print("| device | N | WxH | row | it/s | ratio to reference | ratio to vanilla |")
     print("|---|---|---|---|---|---|---|")
+    phase_rows = []
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         for dev in devices:
@@ -149,12 +179,19 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"| {dev} | {n} | {w}x{h} | {label} | {ref:.1f} | 1.00 | |", flush=True)
                 van = None
                 for method in ("vanilla", "gaussiands"):
-                    its = harness_its(method, n, w, h, dev, a.iters, root)
+                    its, ph = harness_its(method, n, w, h, dev, a.iters, root)
                     van = its if method == "vanilla" else van
                     rel = f"{its / van:.2f}" if method == "gaussiands" and van else ""
                     rows.append(dict(r, row=method, its=its, ratio_reference=its / ref,
-                                     ratio_vanilla=(its / van) if method == "gaussiands" else None))
+                                     ratio_vanilla=(its / van) if method == "gaussiands" else None, phases_ms=ph))
+                    phase_rows.append((dev, n, w, h, method, ph))
                     print(f"| {dev} | {n} | {w}x{h} | {method} | {its:.1f} | {its / ref:.2f} | {rel} |", flush=True)
+    print("\nms per step by phase (whole run, warm-up included; host wall time, meaningful on the CPU only):")
+    print("| device | N | WxH | row | " + " | ".join(PHASES) + " | step |")
+    print("|---|---|---|---|" + "---|" * (len(PHASES) + 1))
+    for dev, n, w, h, method, ph in phase_rows:
+        print(f"| {dev} | {n} | {w}x{h} | {method} | " + " | ".join(f"{ph[k]:.1f}" for k in PHASES)
+              + f" | {sum(ph.values()):.1f} |")
     if a.json:
         from gsbench.store import write_json_atomic
         write_json_atomic(Path(a.json), {"rows": rows, "iters": a.iters, "torch": torch.__version__})

@@ -23,10 +23,16 @@ def _mlp(dims: Sequence[int]) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
-def _unit(x: torch.Tensor) -> torch.Tensor:
+def _unit(x: torch.Tensor, inplace: bool = False) -> torch.Tensor:
+    """Rows scaled to unit length. inplace: overwrite x (a fresh output nobody else holds, no graph);
+    the values are the same either way. The largest magnitude max(max x, -min x) is |x|'s maximum
+    without an |x| temporary (evaluation decodes 512-d maps of every pixel)."""
+    lo, hi = torch.aminmax(x, dim=-1, keepdim=True)
     # divide by the largest magnitude first so the norm cannot overflow (float32 inputs ~1e20+)
-    x = x / x.abs().amax(dim=-1, keepdim=True).clamp_min(1e-30)
-    return x / x.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    m = torch.maximum(hi, -lo).clamp_min(1e-30)
+    x = x.div_(m) if inplace else x / m
+    n = x.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    return x.div_(n) if inplace else x / n
 
 
 class FeatureAutoencoder(nn.Module):
@@ -41,10 +47,17 @@ class FeatureAutoencoder(nn.Module):
         self.decoder = _mlp([self.latent_dim, *reversed(self.hidden), self.in_dim])
 
     def encode(self, x: torch.Tensor) -> torch.Tensor:
-        return _unit(self.encoder(x))
+        y = self.encoder(x)
+        return _unit(y, inplace=not y.requires_grad)
 
     def decode(self, z: torch.Tensor) -> torch.Tensor:
-        return _unit(self.decoder(z))
+        if torch.is_grad_enabled() and (z.requires_grad or any(p.requires_grad for p in self.decoder.parameters())):
+            return _unit(self.decoder(z))
+        # no graph: the same layers with the ReLUs in place (one (N, width) buffer less per layer)
+        y = z
+        for layer in self.decoder:
+            y = torch.relu_(y) if isinstance(layer, nn.ReLU) else layer(y)
+        return _unit(y, inplace=True)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.decode(self.encode(x))

@@ -119,10 +119,22 @@ class Method:
         _check_mode(mode)
         if not self.has_semantics:
             return None
+        return self.semantic_features_modes(camera, (mode,))[mode]
+
+    def semantic_features_modes(self, camera: Camera, modes: tuple) -> dict:
+        """{mode: semantic_features(camera, mode)} from one render; decoded only when "decode" is asked
+        (evaluation scores every query mode of a frame from this one render)."""
+        for m in modes:
+            _check_mode(m)
+        if not self.has_semantics:
+            return {m: None for m in modes}
         feats = self.render(camera).features
-        if mode == "encode":
-            return feats
-        with torch.no_grad():   # in row chunks: the decoder's last layers hold ~3 KB per pixel at once
+        return {m: feats if m == "encode" else self._decode(feats) for m in modes}
+
+    def _decode(self, feats: torch.Tensor) -> torch.Tensor:
+        """Decode an (H, W, d) latent map to the feature space, in row chunks: the decoder's last layers
+        hold ~3 KB per pixel at once."""
+        with torch.no_grad():
             flat = feats.reshape(-1, feats.shape[-1])
             first = self.autoencoder.decode(flat[:DECODE_CHUNK])
             if flat.shape[0] <= DECODE_CHUNK:

@@ -38,6 +38,7 @@ from tqdm import tqdm
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
 from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
+from gsbench.phases import timed
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera
 from gsbench.store import append_jsonl, load_torch, read_jsonl, save_torch_atomic, write_text_atomic
@@ -309,19 +310,23 @@ class Trainer:
             gt = self.views.images[vid]
             fld = field_from_params(self.ps, sh_active_degree(self.step - 1, self.sh_max, self.sh_every))
             out = render(fld, cam, backend=self.backend, background=self.background)
-            res = self.loss_fn(vid, out, gt)
+            with timed("losses"):
+                res = self.loss_fn(vid, out, gt)
             tot = res.total.detach()
             bad_step = torch.where((bad_step == 0) & ~torch.isfinite(tot), torch.full_like(bad_step, self.step),
                                    bad_step)
             self.ps.optimizer.zero_grad(set_to_none=True)
-            res.total.backward()
+            with timed("backward"):
+                res.total.backward()
             with torch.no_grad():
                 do_stats = self.densify and self.step < int(d["until_iter"])
                 if do_stats and out.radii is not None:
-                    self.stats.update(out.means2d.grad if out.means2d is not None else None, out.radii,
-                                      cam.width, cam.height)
+                    with timed("densify"):
+                        self.stats.update(out.means2d.grad if out.means2d is not None else None, out.radii,
+                                          cam.width, cam.height)
                 try:
-                    self.ps.optimizer.step()
+                    with timed("optimiser"):
+                        self.ps.optimizer.step()
                 except RuntimeError as e:   # e.g. Adam's lr / (1 - beta1) overflows float32 (lr ~1e38)
                     if "overflow" not in str(e):
                         raise
@@ -332,10 +337,12 @@ class Trainer:
                     if self.step > int(d["from_iter"]) and self.step % int(d["interval"]) == 0:
                         self._raise_if_bad(bad_step)      # never densify from non-finite values
                         reset_int = int(d["opacity_reset_interval"])
-                        info = densify_and_prune(self.ps, self.stats, d, self.extent,
-                                                 prune_big=self.step > reset_int, generator=self.torch_gen)
+                        with timed("densify"):
+                            info = densify_and_prune(self.ps, self.stats, d, self.extent,
+                                                     prune_big=self.step > reset_int, generator=self.torch_gen)
                     if int(d["opacity_reset_interval"]) > 0 and self.step % int(d["opacity_reset_interval"]) == 0:
-                        reset_opacity(self.ps)
+                        with timed("densify"):
+                            reset_opacity(self.ps)
                         info["opacity_reset"] = True
             for k, v in res.terms.items():
                 acc[k] = acc.get(k, 0.0) + v

@@ -3,11 +3,18 @@
 Query modes: "encode" (the paper: text encoded into the latent space) and "decode" (LangSplat:
 latents decoded to CLIP space); each mode's metric ids end in "+query-<mode>". The un-suffixed
 names carry the configured `query.mode`. Frame sets: see gsbench.evaluation.frames.
+
+Each scored frame is rendered once for every protocol and query mode (`frame_outputs`): the
+rendered latents serve the encode mode, their decoding (done once per frame, only when the decode
+mode is scored) serves the decode mode, and each protocol keeps only its small per-frame result
+(3D-OVS class map, LERF relevancy maps) before the next frame is rendered.
 """
 from __future__ import annotations
 
 import logging
 from typing import Optional
+
+import numpy as np
 
 from gsbench.errors import InputError
 from gsbench.results import FRAME_SET_SUFFIX, QUERY_MODES, SEG_BASES, seg_metric
@@ -56,14 +63,69 @@ def _text(method, texts: list[str], mode: str):
     return None if t is None else to_numpy(t)
 
 
-def _features(method, cam, mode: str):
-    f = method.semantic_features(cam, mode)
-    return None if f is None else to_numpy(f)
+def _features_modes(method, cam, modes: tuple) -> dict:
+    """{mode: features as numpy or None} of one camera, from one render where the method allows it."""
+    many = getattr(method, "semantic_features_modes", None)
+    feats = many(cam, modes) if many is not None else {m: method.semantic_features(cam, m) for m in modes}
+    return {m: (None if f is None else to_numpy(f)) for m, f in feats.items()}
+
+
+def _camera_key(cam) -> tuple:
+    return (cam.width, cam.height, np.asarray(cam.K, np.float64).tobytes(),
+            np.asarray(cam.world_to_camera, np.float64).tobytes())
+
+
+def frame_outputs(method, scene, ids_by_protocol: dict, config: dict, modes: tuple) -> dict:
+    """Per-frame predictions {(protocol, mode, view id): value} for the frames each protocol scores.
+
+    3dovs: the predicted class map (None without features); lerf: (relevancy (Q, H, W) or None,
+    GT masks, GT boxes). Frames are visited one at a time; each distinct camera is rendered once for
+    all protocols and modes and its features are dropped before the next frame.
+    """
+    from gsbench.metrics import lerf, ovs3d
+    text_memo: dict = {}
+
+    def text(texts: list[str], mode: str):
+        key = (tuple(texts), mode)
+        if key not in text_memo:
+            text_memo[key] = _text(method, texts, mode)
+        return text_memo[key]
+
+    need: dict[int, list[str]] = {}
+    for p, ids in ids_by_protocol.items():
+        for i in ids:
+            if p not in need.setdefault(i, []):
+                need[i].append(p)
+    out = {}
+    for i in sorted(need):
+        by_cam: dict = {}
+        for p in need[i]:
+            cam = segmentation_camera(scene, i, p, config)
+            key = _camera_key(cam)
+            if key not in by_cam:
+                by_cam[key] = _features_modes(method, cam, modes)
+            feats = by_cam[key]
+            if p == "3dovs":
+                for m in modes:
+                    t = text(list(scene.class_names), m)
+                    f = feats[m]
+                    out[(p, m, i)] = None if f is None or t is None else ovs3d.ovs3d_predict(f, t)
+            else:
+                masks, boxes = scene_label_masks(scene, i, cam.width, cam.height)
+                queries = list(masks)
+                for m in modes:
+                    f = feats[m]
+                    rel = None
+                    if f is not None and queries:
+                        rel = lerf.lerf_relevancy(f, text(queries, m), text(list(lerf.CANONICAL_NEGATIVES), m))
+                    out[(p, m, i)] = (rel, masks, boxes)
+    return out
 
 
 def score_3dovs(method, scene, ids: list[int], config: dict, mode: str, configured: str,
-                frame_set: str) -> Block:
-    """3D-OVS metrics of frames `ids` in one query mode."""
+                frame_set: str, frames: Optional[dict] = None) -> Block:
+    """3D-OVS metrics of frames `ids` in one query mode (`frames`: `frame_outputs` covering them,
+    computed here when not given)."""
     from gsbench.metrics import ovs3d
     out = Block()
     names = _names("3dovs", mode, configured, frame_set)
@@ -77,12 +139,13 @@ def score_3dovs(method, scene, ids: list[int], config: dict, mode: str, configur
         out.skip(every, f"method {config.get('method')} has no semantic field")
         return out
     ratio = float((config.get("eval") or {}).get("boundary_dilation_ratio", 0.02))
+    if frames is None:
+        frames = frame_outputs(method, scene, {"3dovs": ids}, config, (mode,))
     views, cams = [], []
     for i in ids:
         cam = segmentation_camera(scene, i, "3dovs", config)
         gt = class_masks(scene, i, classes, cam.width, cam.height)
-        feats = _features(method, cam, mode)
-        pred = None if feats is None else ovs3d.ovs3d_predict(feats, text)
+        pred = frames[("3dovs", mode, i)]
         views.append(ovs3d.Ovs3dView(view_name(scene, i), pred, gt))
         cams.append(cam)
     r = ovs3d.evaluate_ovs3d_scene(views, classes, missing="error", dilation_ratio=ratio)
@@ -107,8 +170,10 @@ def score_3dovs(method, scene, ids: list[int], config: dict, mode: str, configur
     return out
 
 
-def score_lerf(method, scene, ids: list[int], config: dict, mode: str, configured: str, frame_set: str) -> Block:
-    """LERF-OVS metrics of frames `ids` in one query mode (relevancy against the canonical negatives)."""
+def score_lerf(method, scene, ids: list[int], config: dict, mode: str, configured: str, frame_set: str,
+               frames: Optional[dict] = None) -> Block:
+    """LERF-OVS metrics of frames `ids` in one query mode (relevancy against the canonical negatives;
+    `frames`: `frame_outputs` covering them, computed here when not given)."""
     from gsbench.metrics import lerf
     out = Block()
     names = _names("lerf", mode, configured, frame_set)
@@ -121,6 +186,8 @@ def score_lerf(method, scene, ids: list[int], config: dict, mode: str, configure
         out.skip(every, f"method {config.get('method')} has no semantic field")
         return out
     kmode = (config.get("eval") or {}).get("lerf_kernels", "auto")
+    if frames is None:
+        frames = frame_outputs(method, scene, {"lerf": ids}, config, (mode,))
     pairs, cams, kernels = [], [], None
     for i in ids:
         cam = segmentation_camera(scene, i, "lerf", config)
@@ -129,12 +196,8 @@ def score_lerf(method, scene, ids: list[int], config: dict, mode: str, configure
             raise InputError(f"scene {scene.path}: label files of different widths give different LERF kernels; "
                              "set eval.lerf_kernels: reference")
         kernels = k
-        masks, boxes = scene_label_masks(scene, i, cam.width, cam.height)
+        rel, masks, boxes = frames[("lerf", mode, i)]
         queries = list(masks)
-        feats = _features(method, cam, mode)
-        rel = None
-        if feats is not None and queries:
-            rel = lerf.lerf_relevancy(feats, _text(method, queries, mode), neg)
         for k_, q in enumerate(queries):
             pairs.append(lerf.LerfPair(view_name(scene, i), q, None if rel is None else rel[k_], masks[q], boxes[q]))
         cams.append(cam)
@@ -164,12 +227,14 @@ def segmentation(method, scene, protocols: list[str], sets: dict, config: dict,
                  modes: tuple = QUERY_MODES) -> Block:
     """Every protocol x frame set x query mode. sets: protocol -> {frame set: ids}."""
     configured = query_mode(config)
+    frames = frame_outputs(method, scene, {p: [i for ids in sets[p].values() for i in ids] for p in protocols},
+                           config, tuple(modes))
     out = Block()
     for p in protocols:
         fn = score_3dovs if p == "3dovs" else score_lerf
         for frame_set, ids in sets[p].items():
             for m in modes:
-                out.merge(fn(method, scene, ids, config, m, configured, frame_set))
+                out.merge(fn(method, scene, ids, config, m, configured, frame_set, frames))
     return out
 
 

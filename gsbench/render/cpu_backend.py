@@ -54,6 +54,7 @@ import numpy as np
 import torch
 
 from gsbench.gaussians import GaussianField
+from gsbench.phases import timed
 from gsbench.render import cpu_kernels as K
 from gsbench.render import cpu_projection as P
 from gsbench.render import rules
@@ -290,10 +291,11 @@ class _FusedRender(torch.autograd.Function):
         ch[:, 3] = prm[:, P.P_Z]
         if n_feat:
             ch[:, 4:] = _numpy(features)[ids]
-        out, t_out, ctx.state = _raster_forward(
-            np.ascontiguousarray(prm[:, P.P_U:P.P_V + 1]), np.ascontiguousarray(prm[:, P.P_CA:P.P_CC + 1]),
-            np.ascontiguousarray(prm[:, P.P_OP]), ch, proj.radii[ids], np.ascontiguousarray(prm[:, P.P_Z]),
-            proj.width, proj.height, tile_size)
+        with timed("raster_forward"):
+            out, t_out, ctx.state = _raster_forward(
+                np.ascontiguousarray(prm[:, P.P_U:P.P_V + 1]), np.ascontiguousarray(prm[:, P.P_CA:P.P_CC + 1]),
+                np.ascontiguousarray(prm[:, P.P_OP]), ch, proj.radii[ids], np.ascontiguousarray(prm[:, P.P_Z]),
+                proj.width, proj.height, tile_size)
         return _split(out, t_out)
 
     @staticmethod
@@ -324,7 +326,8 @@ class _FusedRender(torch.autograd.Function):
                 g_out[..., 4:] = _numpy(g_feat_img)
             g_t_np = (np.zeros((proj.height, proj.width), dtype=proj.np_dtype) if g_t is None
                       else _numpy(g_t.to(dtype)))
-            full = _raster_backward(ctx.state, g_out, g_t_np)
+            with timed("raster_backward"):
+                full = _raster_backward(ctx.state, g_out, g_t_np)
             g_rgb = full[:, K.G_CH:K.G_CH + 3]
             g_feat[ids] = full[:, K.G_CH + 4:]
             g_m2d[ids] = full[:, K.G_MX:K.G_MY + 1]
@@ -335,8 +338,9 @@ class _FusedRender(torch.autograd.Function):
                 gr[:, P.P_OP] = full[:, K.G_OP]
                 gr[:, P.P_Z] = full[:, K.G_CH + 3]
                 _set_threads()
-                P.project_backward(ids, proj.pc, proj.log_scales, proj.quats, proj.logits, proj.cam, gr,
-                                   g_means, g_ls, g_q, g_lg)
+                with timed("projection_backward"):
+                    P.project_backward(ids, proj.pc, proj.log_scales, proj.quats, proj.logits, proj.cam, gr,
+                                       g_means, g_ls, g_q, g_lg)
 
         def t(a, i):
             return torch.from_numpy(np.ascontiguousarray(a)).to(dtype) if need[i] else None
@@ -365,7 +369,8 @@ def render_fused_cpu(field: GaussianField, camera: Camera, tile_size: int = rule
                          + ", ".join(str(t.dtype) for t in tensors))
     if camera.width * camera.height > 2**31 - 1:
         raise ValueError(f"render backend 'cpu': image {camera.width}x{camera.height} is too large")
-    proj = _Projection(field, camera)
+    with timed("projection"):
+        proj = _Projection(field, camera)
     ids_t = torch.from_numpy(proj.ids)
     if field.colors.dim() == 2:
         rgb_vis = field.colors[ids_t]

@@ -1,0 +1,81 @@
+"""Evaluation renders each frame once for every protocol and query mode; the metrics must equal
+those of the earlier flow, which rendered (and decoded) once per protocol, frame set and mode."""
+from __future__ import annotations
+
+import pytest
+
+TINY = ["backend=cpu", "train.iterations=12", "train.max_width=32", "train.eval_every=0", "train.log_every=4",
+        "train.checkpoint_every=0", "train.eval_views=0", "train.densify.enabled=false",
+        "gaussiands.autoencoder.epochs=5", "train.init.max_points=200", "priors.masks.provider=gt"]
+
+
+class _Counting:
+    """A method wrapper counting renders and decodes; `per_call` hides semantic_features_modes, so the
+    scorer falls back to one semantic_features call (one render, one decode) per mode, as before."""
+
+    def __init__(self, method, per_call: bool):
+        self.m, self.renders, self.decodes, self.per_call = method, 0, 0, per_call
+
+    def __getattr__(self, name):
+        if name == "semantic_features_modes" and self.per_call:
+            raise AttributeError(name)
+        return getattr(self.m, name)
+
+    def semantic_features(self, cam, mode):
+        self.renders += 1
+        self.decodes += mode == "decode"
+        return self.m.semantic_features(cam, mode)
+
+    def semantic_features_modes(self, cam, modes):
+        self.renders += 1
+        self.decodes += "decode" in modes
+        return self.m.semantic_features_modes(cam, modes)
+
+
+def _old_flow(method, scene, protocols, sets, config):
+    """The flow before frames were shared: every (protocol, frame set, mode) scores on its own,
+    rendering (and decoding) each of its frames again."""
+    from gsbench.evaluation.block import Block
+    from gsbench.evaluation.segmentation import query_mode, score_3dovs, score_lerf
+    from gsbench.results import QUERY_MODES
+    out = Block()
+    for p in protocols:
+        fn = score_3dovs if p == "3dovs" else score_lerf
+        for frame_set, ids in sets[p].items():
+            for m in QUERY_MODES:
+                out.merge(fn(method, scene, ids, config, m, query_mode(config), frame_set))
+    return out
+
+
+@pytest.mark.slow
+def test_render_once_gives_the_same_metrics(tmp_path):
+    import torch
+
+    from gsbench.config import load_config
+    from gsbench.datasets.synthetic import make_scene
+    from gsbench.evaluation import evaluate_run
+    from gsbench.evaluation.frames import frame_sets
+    from gsbench.evaluation.segmentation import resolve_protocols, segmentation
+    from gsbench.runs import load_run, train_run
+    scene_dir = make_scene("tabletop-small", tmp_path / "s", seed=0, views=8, resolution=(40, 30))
+    cfg = load_config("gaussiands", "cpu-small", TINY)
+    run = train_run(cfg, scene_dir, tmp_path / "run", progress=False)
+    res = evaluate_run(run, progress=False)
+    method, config, scene = load_run(run)
+    protocols, _ = resolve_protocols(scene, "auto")
+    fs = frame_sets(scene, config)
+    sets = {p: fs.protocol_sets(p) for p in protocols}
+    old, new = _Counting(method, per_call=True), _Counting(method, per_call=False)
+    with torch.no_grad():
+        ref = _old_flow(old, scene, protocols, sets, config)
+        got = segmentation(new, scene, protocols, sets, config)
+    assert set(protocols) == {"3dovs", "lerf"} and ref.metrics
+    assert got.metrics == ref.metrics and got.per_view == ref.per_view
+    # the evaluated run's results.json holds exactly these segmentation values
+    for k, v in ref.metrics.items():
+        assert res["metrics"][k] == v, k
+    n_frames = len({i for p in protocols for ids in sets[p].values() for i in ids})
+    # same camera size for both protocols here: one render (and one decode) per frame, against
+    # one per protocol and mode before
+    assert new.renders == new.decodes == n_frames
+    assert old.renders == 2 * 2 * n_frames and old.decodes == 2 * n_frames
