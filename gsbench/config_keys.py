@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Optional
 
-from gsbench.methods.registry import METHODS  # live: the registered method names
+from gsbench.method_table import METHODS  # live: the registered method names (ground floor, imports no method)
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import copy
 import logging
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 import cv2
 import numpy as np
@@ -30,7 +30,7 @@ from gsbench.gaussians import GaussianField
 from gsbench.methods.autoencoder import FeatureAutoencoder
 from gsbench.methods.trainer import TrainViews
 from gsbench.render import RenderOutput, render
-from gsbench.scene import Camera
+from gsbench.scene import Camera, training_size
 from gsbench.store import load_torch, save_torch_atomic
 
 QUERY_MODES = ("encode", "decode")
@@ -62,6 +62,9 @@ class Method:
         self._feature_provider = None
         self._background_cache: dict = {}
         self.info: dict = {}
+        # set by the harness (gsbench.runs.train_run) to gsbench.evaluation's segmentation_metrics, for
+        # the periodic mIoU while training: the methods floor does not import evaluation (docs/architecture.md)
+        self.segmentation_scorer: Optional[Callable] = None
 
     # ------------------------------------------------------------------ protocol
     def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:  # pragma: no cover
@@ -211,15 +214,6 @@ def _check_mode(mode: str) -> None:
 
 
 # ---------------------------------------------------------------------------- shared data preparation
-def training_size(camera: Camera, max_width: Optional[int]) -> tuple[int, int]:
-    """(W, H) of the training images: the camera's size, downscaled to at most `max_width` wide."""
-    w, h = camera.width, camera.height
-    if max_width and w > int(max_width):
-        s = int(max_width) / w
-        return int(max_width), max(1, int(round(h * s)))
-    return w, h
-
-
 def load_views(scene, config: dict, progress: bool = False,
                device: torch.device | str = "cpu") -> tuple[TrainViews, tuple[int, int]]:
     """Train cameras/images at the training resolution (images on `device`, copied once), plus the

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from gsbench.methods.registry import METHODS
+from gsbench.method_table import METHODS
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
