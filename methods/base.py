@@ -25,10 +25,15 @@ import cv2
 import numpy as np
 import torch
 
+from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.methods.autoencoder import FeatureAutoencoder
-from gsbench.methods.trainer import TrainViews
+from gsbench.methods.common import resolve_render_backend
+from gsbench.methods.device import prepare_backend, resolve_backend_for, resolve_device
+from gsbench.methods.registry import get_method
+from gsbench.methods.trainer import TrainViews, init_field
+from gsbench.priors import get_feature_provider
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera, training_size
 from gsbench.store import load_torch, save_torch_atomic
@@ -73,8 +78,6 @@ class Method:
     def _prepare(self, config: dict) -> torch.device:
         """Keep the config and resolve the training device and render backend, before any work (so a
         bad device or backend fails at once, not mid-run)."""
-        from gsbench.methods.common import resolve_render_backend
-        from gsbench.methods.device import prepare_backend, resolve_device
         self.config = config
         dev = resolve_device(config)
         self._backend = resolve_render_backend(config, dev)
@@ -130,8 +133,6 @@ class Method:
 
     def feature_provider(self):
         if self._feature_provider is None:
-            from gsbench.methods.device import resolve_device
-            from gsbench.priors import get_feature_provider
             dev = self.field.means.device if self.field is not None else resolve_device(self.config)
             self._feature_provider = get_feature_provider(self.config["priors"]["features"], device=str(dev))
         return self._feature_provider
@@ -176,13 +177,11 @@ class Method:
         """Load a saved model onto `device` (None = where its render backend runs: the CPU for the cpu
         backend, else CUDA when available, else the CPU); a saved render backend that cannot run there
         is re-resolved as `auto` for that device (logged)."""
-        from gsbench.methods.device import prepare_backend, resolve_backend_for, resolve_device
         st = load_torch(Path(path))
         if not isinstance(st, dict) or "field" not in st:
             raise InputError(f"{path}: not a gsbench model file")
         dev = (torch.device(device) if device is not None
                else resolve_device({"train": {"device": "auto"}, "backend": st.get("backend", "torch")}))
-        from gsbench.methods import get_method
         klass = get_method(st["method"]) if cls is Method else cls
         m = klass()
         m.field = GaussianField.from_state_dict(st["field"]).to(device=dev)
@@ -218,7 +217,6 @@ def load_views(scene, config: dict, progress: bool = False,
                device: torch.device | str = "cpu") -> tuple[TrainViews, tuple[int, int]]:
     """Train cameras/images at the training resolution (images on `device`, copied once), plus the
     first `eval_views` test views."""
-    from gsbench.datasets.splits import split_ids
     tcfg = config["train"]
     train_ids, test_ids = split_ids(scene, config)
     if not train_ids:
@@ -289,7 +287,6 @@ def init_mode(scene, config: dict) -> str:
 
 def scene_init(scene, config: dict, feature_dim: int):
     """Initial field from the config's init mode (see `init_mode`); returns (field, how)."""
-    from gsbench.methods.trainer import init_field
     icfg = config["train"]["init"]
     mode = init_mode(scene, config)
     centres = np.stack([c.center for c in scene.cameras])

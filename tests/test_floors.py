@@ -10,11 +10,14 @@ must say why it is not at the top of its file, on its own line: `# lazy: <reason
 from __future__ import annotations
 
 import ast
+import os
 import subprocess
 import sys
 import textwrap
 from dataclasses import dataclass
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE_DIRS = {"gsbench": "gsbench", "methods": "gsbench.methods", "datasets": "gsbench.datasets",
@@ -59,6 +62,53 @@ FLOORS: dict[str, int] = {
 # Upward imports still present, each with why and what would remove it. Empty: none remain. A new
 # upward import fails; a listed one that no longer occurs fails too, so the list only shrinks.
 ALLOWED_UPWARD: set[tuple[str, str]] = set()
+
+# Function-level imports without a reason yet, all in files other branches were rewriting when the
+# rule came in (evaluation/*, grids/*, methods/trainer.py, reports/*): most date from the import loop
+# the floors removed and can move to the top of their file; evaluation.run -> runs stays lazy (runs
+# imports gsbench.evaluation) and needs its reason. Only shrinks: a pair that is no longer a bare
+# function-level import fails test_every_function_level_import_says_why until it is removed here.
+PENDING_REASON: set[tuple[str, str]] = {
+    ("gsbench.evaluation.image", "gsbench.metrics.image"),
+    ("gsbench.evaluation.image", "gsbench.metrics.perceptual"),
+    ("gsbench.evaluation.image", "gsbench.metrics.timing"),
+    ("gsbench.evaluation.labels", "gsbench.datasets.ovs"),
+    ("gsbench.evaluation.masks", "gsbench.environment"),
+    ("gsbench.evaluation.masks", "gsbench.metrics.ovs3d"),
+    ("gsbench.evaluation.masks", "gsbench.metrics.segmentation"),
+    ("gsbench.evaluation.masks", "gsbench.store"),
+    ("gsbench.evaluation.removal", "gsbench.metrics.image"),
+    ("gsbench.evaluation.run", "gsbench.environment"),
+    ("gsbench.evaluation.run", "gsbench.metrics.ordering"),
+    ("gsbench.evaluation.run", "gsbench.runlock"),
+    ("gsbench.evaluation.run", "gsbench.runs"),
+    ("gsbench.evaluation.segmentation", "gsbench.metrics.lerf"),
+    ("gsbench.evaluation.segmentation", "gsbench.metrics.ovs3d"),
+    ("gsbench.grids.failed", "gsbench.datasets"),
+    ("gsbench.grids.failed", "gsbench.environment"),
+    ("gsbench.grids.failed", "gsbench.evaluation"),
+    ("gsbench.grids.failed", "gsbench.results"),
+    ("gsbench.grids.planning", "gsbench.config"),
+    ("gsbench.grids.planning", "gsbench.datasets"),
+    ("gsbench.grids.planning", "gsbench.datasets.synthetic"),
+    ("gsbench.grids.priors_share", "gsbench.datasets"),
+    ("gsbench.grids.priors_share", "gsbench.errors"),
+    ("gsbench.grids.priors_share", "gsbench.grids.executors"),
+    ("gsbench.grids.priors_share", "gsbench.methods.device"),
+    ("gsbench.grids.priors_share", "gsbench.methods.registry"),
+    ("gsbench.grids.priors_share", "gsbench.priors"),
+    ("gsbench.grids.running", "gsbench.evaluation"),
+    ("gsbench.grids.running", "gsbench.grids.executors"),
+    ("gsbench.grids.running", "gsbench.methods.device"),
+    ("gsbench.grids.running", "gsbench.runs"),
+    ("gsbench.grids.spec", "gsbench.datasets.synthetic"),
+    ("gsbench.methods.trainer", "gsbench.metrics"),
+    ("gsbench.reports", "gsbench.reports.build"),
+    ("gsbench.reports.html", "gsbench.store"),
+    ("gsbench.reports.plots", "gsbench.reports.sweeps"),
+    ("gsbench.reports.spec", "gsbench.methods.registry"),
+    ("gsbench.reports.studies", "gsbench.methods.registry"),
+}
 
 
 @dataclass(frozen=True)
@@ -229,9 +279,12 @@ def test_no_module_imports_from_a_floor_above():
 
 
 def test_every_function_level_import_says_why():
-    bare = [f"{i.path.relative_to(ROOT)}:{i.line}: {i.source} imports {i.target} inside a function"
-            for i in imports() if i.in_function and not i.reason]
-    assert not bare, "add '# lazy: <reason>' or move the import to the top:\n" + "\n".join(sorted(set(bare)))
+    bare = [i for i in imports() if i.in_function and not i.reason]
+    new = sorted({f"{i.path.relative_to(ROOT)}:{i.line}: {i.source} imports {i.target} inside a function"
+                  for i in bare if (i.source, i.target) not in PENDING_REASON})
+    assert not new, "add '# lazy: <reason>' or move the import to the top:\n" + "\n".join(new)
+    gone = sorted(PENDING_REASON - {(i.source, i.target) for i in bare})
+    assert not gone, f"these have a reason or moved up now, remove them from PENDING_REASON: {gone}"
 
 
 def test_the_ground_floor_loads_no_module_above_it():
@@ -244,3 +297,33 @@ def test_the_ground_floor_loads_no_module_above_it():
     assert set(ground) <= set(loaded)
     assert [m for m in loaded if floor(m) > 0] == []
 
+
+
+_IMPORT_EACH = """
+import importlib, os, sys
+import numpy, torch  # noqa: F401  third-party start-up paid once, before the forks
+failed = []
+for name in sys.argv[1:]:
+    pid = os.fork()
+    if pid == 0:
+        try:
+            importlib.import_module(name)
+        except BaseException as e:
+            print(f"{name}: {type(e).__name__}: {e}", flush=True)
+            os._exit(1)
+        os._exit(0)
+    if os.waitpid(pid, 0)[1] != 0:
+        failed.append(name)
+sys.exit(1 if failed else 0)
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
+def test_every_module_imports_first_in_a_fresh_process():
+    """Each module imported first, alone (a forked child of a process holding no gsbench module): an
+    import cycle that the order of a test run hides fails here."""
+    names = sorted(modules())
+    out = subprocess.run([sys.executable, "-c", _IMPORT_EACH, *names], capture_output=True, text=True,
+                         cwd=ROOT.parent)
+    assert out.returncode == 0, out.stdout + out.stderr
