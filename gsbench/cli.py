@@ -1,5 +1,6 @@
 """The `gsbench` command line. Each sub-command lives in gsbench/commands/<name>.py with
-`add_arguments(parser)` and `run(args) -> int`; it is imported only when used.
+`add_arguments(parser)` and `run(args) -> int`. Building the parser imports every command module, so
+a command imports its heavy parts inside `run` (marked `# lazy: start-up`, docs/architecture.md).
 
 Errors a user can act on (gsbench.errors.InputError and its subclasses, NonFiniteError, OSError)
 are printed as one line with exit status 1; anything else is a bug and propagates with its
@@ -14,6 +15,9 @@ import logging
 import os
 import sys
 from typing import Optional, Sequence
+
+from gsbench import startup
+from gsbench.errors import InputError, NonFiniteError
 
 COMMANDS = {
     "make-scene": ("make_scene", "generate a synthetic scene (analytic ray caster) in 3D-OVS / LERF-OVS layouts"),
@@ -103,9 +107,6 @@ def one_line(e: BaseException) -> str:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    from gsbench import startup
-    from gsbench.errors import InputError, NonFiniteError
-
     startup()
     parser = build_parser()
     args = apply_global_flags(parser.parse_args(argv))

@@ -1,8 +1,8 @@
-"""Config tree: default.yaml <- preset <- overrides, the run id, and the per-scene resolver.
+"""Config tree: default.yaml <- preset <- overrides, and the run id.
 
     cfg = load_config("gaussiands", "cpu-small", ["train.iterations=300", "backend=torch"])
     rid = run_id(cfg, scene_fingerprint(path))
-    cfg, dropped = resolve_for_scene(cfg, scene)   # drops what the scene cannot feed or nothing uses
+    # the per-scene resolver is gsbench.methods.registry.resolve_for_scene (the methods floor)
 
 This module is the one path by which a value enters a config: `gsbench train --set`, `gsbench
 ablate --set`, presets and grid files (base.set, axes, sweeps, extra cells) all go through
@@ -272,19 +272,10 @@ def run_id(config: dict, scene_fingerprint: str) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
 
 
-# ---------------------------------------------------------------------------- per-scene resolution
-def resolve_for_scene(config: dict, scene) -> tuple[dict, dict]:
-    """Switch off what the scene cannot feed or nothing uses, as the config's method registered it
-    (gsbench/methods/registry.py). Returns (resolved config, dropped {part: reason})."""
-    from gsbench.methods.registry import resolve_for_scene as resolve
-    return resolve(config, scene)
-
-
 __all__ = [
     "load_config",
     "load_tree",
     "run_id",
-    "resolve_for_scene",
     "parse_overrides",
     "apply_overrides",
     "check_value",

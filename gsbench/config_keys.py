@@ -3,8 +3,9 @@
 A key's type comes from gsbench/configs/default.yaml (a bool default takes only true/false, a
 number default only numbers, ...). This table adds ranges and choices, and the type of keys whose
 default is null. A key of default.yaml without a rule here is type-checked only. The choices are
-spelled out here (not imported) so that reading a config never imports torch or a model library;
-tests/test_config.py checks that they agree with the code that consumes them.
+spelled out here (not imported) so that reading a config imports no method, renderer or model library
+(this module is on the ground floor, docs/architecture.md); tests/test_config.py checks that they
+agree with the code that consumes them. The method names are read live from gsbench.method_table.
 """
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Optional
 
-from gsbench.methods.registry import METHODS  # live: the registered method names
+from gsbench.method_table import METHODS  # live: the registered method names (ground floor, imports no method)
 
 
 @dataclass(frozen=True)

@@ -21,11 +21,16 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from gsbench.config import resolve_for_scene, run_id
+from gsbench.config import run_id
+from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError, NonFiniteError
+from gsbench.evaluation import segmentation_metrics
+from gsbench.methods.base import Method
+from gsbench.methods.device import resolve_device
+from gsbench.methods.registry import get_method, resolve_for_scene
 from gsbench.runlock import RunLock
-from gsbench.store import read_json, write_json_atomic
+from gsbench.store import read_json, read_jsonl, write_json_atomic
 
 log = logging.getLogger(__name__)
 MODEL = "model.pt"
@@ -41,19 +46,16 @@ def read_status(run_dir: Path) -> dict | None:
 
 
 def _load_scene(scene_path):
-    from gsbench.datasets import load_scene
     return load_scene(scene_path)
 
 
 def _fingerprint(scene_path) -> str:
-    from gsbench.datasets import scene_fingerprint
     return scene_fingerprint(scene_path)
 
 
 def _device(cfg: dict) -> str:
     """The device training uses, for the memory counters (methods.device.resolve_device). A config
     it refuses gets "cpu" here: fit() raises the same error next and records it in status.json."""
-    from gsbench.methods.device import resolve_device
     try:
         return str(resolve_device(cfg))
     except InputError:
@@ -79,8 +81,6 @@ def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: boo
 
 
 def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) -> Path:
-    from gsbench.methods import get_method
-
     fp = _fingerprint(scene_path)
     rid = run_id(config, fp)
     st = read_status(run_dir)
@@ -111,6 +111,7 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
     prev_s = float((st or {}).get("train_s_so_far") or 0.0)
     _status(run_dir, "running", "", train_s_so_far=prev_s)
     method = get_method(cfg["method"])()
+    method.segmentation_scorer = segmentation_metrics   # periodic mIoU: the harness hands evaluation's scorer in
     t0 = time.perf_counter()
     memory = PeakMemory(_device(cfg)).start()
     try:
@@ -135,7 +136,6 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
 
 
 def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s: float, peaks: dict) -> None:
-    from gsbench.store import read_jsonl
     log = read_jsonl(run_dir / "train_log.jsonl")
     steps = [int(r["step"]) for r in log if "step" in r]
     last_eval = next((r["eval"] for r in reversed(log) if "eval" in r), None)
@@ -153,7 +153,6 @@ def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s:
 
 def load_run(run_dir: str | Path):
     """(trained Method, resolved config, Scene) of a finished run folder."""
-    from gsbench.methods import Method
     run_dir = Path(run_dir)
     st = read_status(run_dir)
     if st is None:

@@ -7,6 +7,7 @@ nothing else converts.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 import torch
@@ -118,3 +119,13 @@ class Camera:
     @classmethod
     def from_dict(cls, d: dict) -> "Camera":
         return cls(np.array(d["K"]), np.array(d["world_to_camera"]), d["width"], d["height"], d.get("name", ""))
+
+
+def training_size(camera: Camera, max_width: Optional[int]) -> tuple[int, int]:
+    """(W, H) of the training images: the camera's size, downscaled to at most `max_width` wide (the
+    rule training and evaluation at the training resolution share, so it sits beside Camera)."""
+    w, h = camera.width, camera.height
+    if max_width and w > int(max_width):
+        s = int(max_width) / w
+        return int(max_width), max(1, int(round(h * s)))
+    return w, h

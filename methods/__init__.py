@@ -14,7 +14,7 @@ from gsbench.methods.registry import METHODS, get_method
 
 def __getattr__(name: str) -> Any:
     if name == "Method":
-        from gsbench.methods.base import Method
+        from gsbench.methods.base import Method  # lazy: start-up (no trainer for a listing)
         return Method
     raise AttributeError(f"module 'gsbench.methods' has no attribute {name!r}")
 

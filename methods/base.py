@@ -19,18 +19,23 @@ from __future__ import annotations
 import copy
 import logging
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 import torch
 
 from gsbench.datasets.imageio import resize_rgb
+from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.methods.autoencoder import FeatureAutoencoder
-from gsbench.methods.trainer import TrainViews
+from gsbench.methods.common import resolve_render_backend
+from gsbench.methods.device import prepare_backend, resolve_backend_for, resolve_device
+from gsbench.methods.registry import get_method
+from gsbench.methods.trainer import TrainViews, init_field
+from gsbench.priors import get_feature_provider
 from gsbench.render import RenderOutput, render
-from gsbench.scene import Camera
+from gsbench.scene import Camera, training_size
 from gsbench.store import load_torch, save_torch_atomic
 
 QUERY_MODES = ("encode", "decode")
@@ -63,6 +68,9 @@ class Method:
         self._feature_provider = None
         self._background_cache: dict = {}
         self.info: dict = {}
+        # set by the harness (gsbench.runs.train_run) to gsbench.evaluation's segmentation_metrics, for
+        # the periodic mIoU while training: the methods floor does not import evaluation (docs/architecture.md)
+        self.segmentation_scorer: Optional[Callable] = None
 
     # ------------------------------------------------------------------ protocol
     def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:  # pragma: no cover
@@ -71,8 +79,6 @@ class Method:
     def _prepare(self, config: dict) -> torch.device:
         """Keep the config and resolve the training device and render backend, before any work (so a
         bad device or backend fails at once, not mid-run)."""
-        from gsbench.methods.common import resolve_render_backend
-        from gsbench.methods.device import prepare_backend, resolve_device
         self.config = config
         dev = resolve_device(config)
         self._backend = resolve_render_backend(config, dev)
@@ -147,8 +153,6 @@ class Method:
 
     def feature_provider(self):
         if self._feature_provider is None:
-            from gsbench.methods.device import resolve_device
-            from gsbench.priors import get_feature_provider
             dev = self.field.means.device if self.field is not None else resolve_device(self.config)
             self._feature_provider = get_feature_provider(self.config["priors"]["features"], device=str(dev))
         return self._feature_provider
@@ -193,13 +197,11 @@ class Method:
         """Load a saved model onto `device` (None = where its render backend runs: the CPU for the cpu
         backend, else CUDA when available, else the CPU); a saved render backend that cannot run there
         is re-resolved as `auto` for that device (logged)."""
-        from gsbench.methods.device import prepare_backend, resolve_backend_for, resolve_device
         st = load_torch(Path(path))
         if not isinstance(st, dict) or "field" not in st:
             raise InputError(f"{path}: not a gsbench model file")
         dev = (torch.device(device) if device is not None
                else resolve_device({"train": {"device": "auto"}, "backend": st.get("backend", "torch")}))
-        from gsbench.methods import get_method
         klass = get_method(st["method"]) if cls is Method else cls
         m = klass()
         m.field = GaussianField.from_state_dict(st["field"]).to(device=dev)
@@ -231,20 +233,10 @@ def _check_mode(mode: str) -> None:
 
 
 # ---------------------------------------------------------------------------- shared data preparation
-def training_size(camera: Camera, max_width: Optional[int]) -> tuple[int, int]:
-    """(W, H) of the training images: the camera's size, downscaled to at most `max_width` wide."""
-    w, h = camera.width, camera.height
-    if max_width and w > int(max_width):
-        s = int(max_width) / w
-        return int(max_width), max(1, int(round(h * s)))
-    return w, h
-
-
 def load_views(scene, config: dict, progress: bool = False,
                device: torch.device | str = "cpu") -> tuple[TrainViews, tuple[int, int]]:
     """Train cameras/images at the training resolution (images on `device`, copied once), plus the
     first `eval_views` test views."""
-    from gsbench.datasets.splits import split_ids
     tcfg = config["train"]
     train_ids, test_ids = split_ids(scene, config)
     if not train_ids:
@@ -314,7 +306,6 @@ def init_mode(scene, config: dict) -> str:
 
 def scene_init(scene, config: dict, feature_dim: int):
     """Initial field from the config's init mode (see `init_mode`); returns (field, how)."""
-    from gsbench.methods.trainer import init_field
     icfg = config["train"]["init"]
     mode = init_mode(scene, config)
     centres = np.stack([c.center for c in scene.cameras])

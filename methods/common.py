@@ -8,19 +8,15 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
+from gsbench.methods.device import resolve_backend_for, resolve_device
+from gsbench.methods.registry import build_priors_request, uses
 from gsbench.methods.trainer import LossResult, Trainer, TrainViews, periodic_eval
-
-
-def uses(config: dict) -> dict:
-    """What the (resolved) config feeds: {"depth_prior": bool, "semantics": bool}, as its method registered."""
-    from gsbench.methods.registry import get_spec
-    return get_spec(config["method"]).uses(config)
+from gsbench.priors import prepare_priors
 
 
 def resolve_render_backend(config: dict, device: Optional[torch.device] = None) -> str:
     """The concrete backend id for the training device (`auto` -> gsplat on CUDA, cpu on the CPU);
     checked importable now, not mid-run. `device` defaults to the config's `train.device`."""
-    from gsbench.methods.device import resolve_backend_for, resolve_device
     dev = resolve_device(config) if device is None else torch.device(device)
     return resolve_backend_for(config.get("backend", "auto"), dev)
 
@@ -33,9 +29,6 @@ def cache_dir_for(config: dict, run_dir: Path) -> Path:
 def fit_priors(scene, config: dict, run_dir: Path, *, progress: bool):
     """The priors of fit(): computed from the registry's priors request, the same dict a grid builds
     to share priors between cells, so the two cannot ask for different cache entries."""
-    from gsbench.methods.device import resolve_device
-    from gsbench.methods.registry import build_priors_request
-    from gsbench.priors import prepare_priors
     req = build_priors_request(config, scene)
     if req is None:
         raise InputError(f"{scene.path}: the scene has no training views")
@@ -49,18 +42,21 @@ def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Ca
     """Periodic segmentation mIoU of a semantic method on the eval views (training resolution), with
     gsbench.evaluation's code in the configured query mode: {"miou_3dovs": .., "miou_lerf": ..} for the
     protocols the scene supports. Returns {} while the field has no latents or the method no
-    autoencoder yet (e.g. twostage's rgb phase); None when the scene has no segmentation GT at all."""
+    autoencoder yet (e.g. twostage's rgb phase); None when the scene has no segmentation GT at all.
+    The scorer is `method.segmentation_scorer`, handed in by the harness (gsbench.runs); without one
+    each entry says so ("miou_skipped")."""
     if method is None or not views.eval_cameras or not (scene.has_semantics or scene.has_labels):
         return None
     import copy
-
-    from gsbench.evaluation import segmentation_metrics
+    scorer = method.segmentation_scorer
     ids = sorted(views.eval_cameras)
     cams = [views.eval_cameras[i] for i in ids]
 
     def _sem(fld: GaussianField) -> dict:
         if fld.features is None or method.autoencoder is None:
             return {}
+        if scorer is None:
+            return {"miou_skipped": "no segmentation scorer: fit() was not called through gsbench.runs.train_run"}
         try:   # build (and cache) the text encoder once, on the real method
             method.feature_provider()
         except (InputError, ImportError, OSError) as e:
@@ -69,7 +65,7 @@ def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Ca
             return {"miou_skipped": f"text encoder unavailable: {type(e).__name__}: {e}"}
         m = copy.copy(method)
         m.field = fld
-        metrics, skipped = segmentation_metrics(m, scene, ids, cams, config)
+        metrics, skipped = scorer(m, scene, ids, cams, config)
         out = {k: float(metrics[k]) for k in ("miou_3dovs", "miou_lerf") if metrics.get(k) is not None}
         if out:
             out["query_mode"] = (config.get("query") or {}).get("mode", "encode")

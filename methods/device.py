@@ -75,7 +75,7 @@ def resolve_backend_for(backend: str, device: torch.device) -> str:
         backend = "cpu"
     if backend == "cpu":
         try:
-            import gsbench.render.cpu_backend  # noqa: F401
+            import gsbench.render.cpu_backend  # lazy: optional (numba probe)  # noqa: F401
         except ImportError as e:
             raise InputError(f"render backend 'cpu' is not available in this build ({e}); "
                              f"use --set backend=torch") from None

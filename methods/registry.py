@@ -1,104 +1,47 @@
-"""The method registry: the one place that knows which methods exist and what each needs.
+"""The method registry's behaviour: per-scene resolution, the priors request and the built-in rules.
 
-A method is registered once with a `MethodSpec`: its name, the class that implements the Method
-protocol (imported only when the method runs, so listing methods stays cheap), its report label,
-its own config section, its resolver (what to switch off when the scene cannot feed it, with
-reasons) and whether its masks are per-frame. Everything that used to repeat this knowledge reads it
-from here: CLI choices, the config's `method` check, the per-scene resolver, the priors request that
-both `fit()` and a grid's shared-priors step build, and the report order (registration order).
-
-    register(MethodSpec(name="mine", target="gsbench.methods.mine:Mine", label="Mine", section=None,
-                        resolve=resolve_rgb_only, uses=uses_nothing))
+Which methods exist, and their specs, is the ground-floor table gsbench/method_table.py (re-exported
+here). This module imports what a spec names: the Method class (only when the method runs, so
+listing methods stays cheap), its resolver (what to switch off when the scene cannot feed it, with
+reasons) and its `uses` rule. Everything that used to repeat this knowledge reads it from the table
+or from here: CLI choices, the config's `method` check, the per-scene resolver, the priors request
+that both `fit()` and a grid's shared-priors step build, and the report order (registration order).
 """
 from __future__ import annotations
 
 import copy
 import importlib
-from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator, Optional
+from typing import Any, Callable, Optional
 
+from gsbench.datasets import load_scene
+from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
+from gsbench.method_table import METHODS, MethodSpec, get_spec, method_sort_key, register, unregister
+from gsbench.priors.labels import SOURCE_TEXT, label_source, labelled_views
+from gsbench.scene import training_size
 
 Drop = Callable[[str, str], None]
 
 
-@dataclass(frozen=True)
-class MethodSpec:
-    """What gsbench knows about a method without importing it."""
-
-    name: str
-    target: str                          # "module:Class" implementing gsbench.methods.base.Method
-    label: str                           # name in tables and plots
-    section: Optional[str]               # the method's own top-level config section (None: shared keys only)
-    resolve: Callable[[dict, Any, Drop], None]   # edits the config in place; drop(part, reason) records why
-    uses: Callable[[dict], dict]         # resolved config -> {"depth_prior": bool, "semantics": bool}
-    per_frame_masks: bool = False        # semantic masks per view (not propagated across views)
-
-
-_REGISTRY: dict[str, MethodSpec] = {}
-
-
-class _Names(Sequence):
-    """The registered names, in registration order, read live (a method registered later is in it)."""
-
-    def __getitem__(self, i):  # type: ignore[override]
-        return tuple(_REGISTRY)[i]
-
-    def __len__(self) -> int:
-        return len(_REGISTRY)
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(tuple(_REGISTRY))
-
-    def __contains__(self, name: object) -> bool:
-        return name in _REGISTRY
-
-    def __repr__(self) -> str:
-        return repr(tuple(_REGISTRY))
-
-
-METHODS: Sequence[str] = _Names()
-
-
-def register(spec: MethodSpec) -> MethodSpec:
-    """Add a method; a second registration of the same name is a programming error."""
-    if not spec.name or not spec.name.replace("-", "").replace("_", "").isalnum():
-        raise ValueError(f"method name {spec.name!r}: use letters, digits, '-' or '_'")
-    if spec.name in _REGISTRY:
-        raise ValueError(f"method {spec.name!r} is already registered (by {_REGISTRY[spec.name].target})")
-    if ":" not in spec.target:
-        raise ValueError(f"method {spec.name!r}: target must be 'module:Class', got {spec.target!r}")
-    _REGISTRY[spec.name] = spec
-    return spec
-
-
-def unregister(name: str) -> None:
-    """Remove a method (tests register throw-away methods)."""
-    _REGISTRY.pop(name, None)
-
-
-def get_spec(name: str) -> MethodSpec:
-    if name not in _REGISTRY:
-        raise InputError(f"unknown method {name!r}; choose one of {', '.join(_REGISTRY)}")
-    return _REGISTRY[name]
+def load_target(target: str) -> Any:
+    """The object a spec names as "module:attribute" (its module imported now)."""
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)
 
 
 def get_method(name: str) -> type:
     """The Method class registered under `name` (imported now)."""
     spec = get_spec(name)
-    module, _, attr = spec.target.partition(":")
-    klass = getattr(importlib.import_module(module), attr)
+    klass = load_target(spec.target)
     if getattr(klass, "name", None) != spec.name:
         raise TypeError(f"{spec.target}.name is {getattr(klass, 'name', None)!r}, registered as {spec.name!r}")
     return klass
 
 
-def method_sort_key(name: Any) -> tuple[int, str]:
-    """Report order: registration order, unknown names last (alphabetical)."""
-    names = tuple(_REGISTRY)
-    return (names.index(name) if name in names else len(names), str(name))
+def uses(config: dict) -> dict:
+    """What the (resolved) config feeds: {"depth_prior": bool, "semantics": bool}, as its method registered."""
+    return load_target(get_spec(config["method"]).uses)(config)
 
 
 # ---------------------------------------------------------------------------- per-scene resolution
@@ -117,7 +60,7 @@ def resolve_for_scene(config: dict, scene) -> tuple[dict, dict]:
     def drop(part: str, reason: str) -> None:
         dropped.setdefault(part, reason)
 
-    spec.resolve(cfg, scene, drop)
+    load_target(spec.resolve)(cfg, scene, drop)
     cfg["dropped"] = dropped
     return cfg, dropped
 
@@ -139,8 +82,6 @@ def semantic_source(cfg: dict, scene) -> tuple[bool, str]:
 
     The reason names what the scene lacks: instance maps (only synthetic scenes have them), any
     labels at all, or labels on a view that is trained on."""
-    from gsbench.datasets.splits import split_ids
-    from gsbench.priors.labels import SOURCE_TEXT, label_source, labelled_views
     m = cfg["priors"]["masks"]["provider"]
     f = cfg["priors"]["features"]["provider"]
     labels = label_source(scene)
@@ -197,16 +138,13 @@ def priors_request(config: dict, scene) -> Optional[dict]:
 def build_priors_request(config: dict, scene) -> Optional[dict]:
     """The request even when it asks for nothing (fit still orders the views); None without train views."""
     if isinstance(scene, (str, Path)):
-        from gsbench.datasets import load_scene
         scene = load_scene(scene)
     cfg, _ = resolve_for_scene(config, scene)
-    from gsbench.datasets.splits import split_ids
     train_ids, _ = split_ids(scene, cfg)   # the views fit() trains on (train.holdout)
     if not train_ids:
         return None
     spec = get_spec(cfg["method"])
-    use = spec.uses(cfg)
-    from gsbench.methods.base import training_size
+    use = load_target(spec.uses)(cfg)
     w, h = training_size(scene.cameras[train_ids[0]], cfg["train"].get("max_width"))
     return {"scene_path": str(scene.path), "priors": cfg["priors"], "view_ids": sorted(train_ids),
             "size": [w, h], "need_depth": bool(use["depth_prior"]), "need_sem": bool(use["semantics"]),
@@ -214,7 +152,7 @@ def build_priors_request(config: dict, scene) -> Optional[dict]:
 
 
 # ---------------------------------------------------------------------------- the built-in methods
-def _resolve_vanilla(cfg: dict, scene, drop: Drop) -> None:
+def resolve_vanilla(cfg: dict, scene, drop: Drop) -> None:
     on = cfg["gaussiands"]["losses"]
     for k in ("depth", "tv", "sem", "ds"):
         on[k] = False
@@ -222,11 +160,11 @@ def _resolve_vanilla(cfg: dict, scene, drop: Drop) -> None:
         drop(part, "method vanilla is RGB only")
 
 
-def _uses_vanilla(cfg: dict) -> dict:
+def uses_vanilla(cfg: dict) -> dict:
     return {"depth_prior": False, "semantics": False}
 
 
-def _resolve_twostage(cfg: dict, scene, drop: Drop) -> None:
+def resolve_twostage(cfg: dict, scene, drop: Drop) -> None:
     on = cfg["gaussiands"]["losses"]
     on["depth"] = on["tv"] = on["ds"] = False
     drop("priors.depth", "method twostage uses no depth prior (RGB, then semantics on frozen geometry)")
@@ -235,11 +173,11 @@ def _resolve_twostage(cfg: dict, scene, drop: Drop) -> None:
     resolve_semantics(cfg, scene, drop)
 
 
-def _uses_twostage(cfg: dict) -> dict:
+def uses_twostage(cfg: dict) -> dict:
     return {"depth_prior": False, "semantics": bool(cfg["gaussiands"]["losses"]["sem"])}
 
 
-def _resolve_gaussiands(cfg: dict, scene, drop: Drop) -> None:
+def resolve_gaussiands(cfg: dict, scene, drop: Drop) -> None:
     g = cfg["gaussiands"]
     on = g["losses"]
     if g["depth_formulation"] == "none" and on["depth"]:
@@ -257,21 +195,15 @@ def _resolve_gaussiands(cfg: dict, scene, drop: Drop) -> None:
     resolve_semantics(cfg, scene, drop)
 
 
-def _uses_gaussiands(cfg: dict) -> dict:
+def uses_gaussiands(cfg: dict) -> dict:
     g = cfg["gaussiands"]
     on = g["losses"]
     depth_terms = bool(on["depth"] and g["depth_formulation"] != "none") or bool(on["ds"])
     return {"depth_prior": depth_terms, "semantics": bool(on["sem"] or on["ds"])}
 
 
-# registration order is the report order: the RGB baseline, the decoupled baseline, the reference
-register(MethodSpec(name="vanilla", target="gsbench.methods.vanilla:Vanilla", label="3DGS (vanilla)",
-                    section=None, resolve=_resolve_vanilla, uses=_uses_vanilla))
-register(MethodSpec(name="twostage", target="gsbench.methods.twostage:TwoStage", label="Two-stage",
-                    section="twostage", resolve=_resolve_twostage, uses=_uses_twostage, per_frame_masks=True))
-register(MethodSpec(name="gaussiands", target="gsbench.methods.gaussiands:GaussianDS", label="GaussianDS",
-                    section="gaussiands", resolve=_resolve_gaussiands, uses=_uses_gaussiands))
-
-__all__ = ["MethodSpec", "METHODS", "register", "unregister", "get_spec", "get_method", "method_sort_key",
+__all__ = ["MethodSpec", "METHODS", "register", "unregister", "get_spec", "get_method", "method_sort_key", "uses",
+           "load_target", "resolve_vanilla", "uses_vanilla", "resolve_twostage", "uses_twostage",
+           "resolve_gaussiands", "uses_gaussiands",
            "resolve_for_scene", "priors_request", "build_priors_request", "depth_source", "semantic_source",
            "resolve_semantics"]

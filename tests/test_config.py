@@ -2,9 +2,10 @@
 import numpy as np
 import pytest
 
-from gsbench.config import load_config, parse_overrides, resolve_for_scene, run_id
+from gsbench.config import load_config, parse_overrides, run_id
 from gsbench.datasets.base import Scene
 from gsbench.errors import InputError
+from gsbench.methods.registry import resolve_for_scene
 from gsbench.scene import Camera
 
 

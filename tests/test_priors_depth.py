@@ -1,9 +1,6 @@
 """Depth priors: gt (simulated estimator), sparse (z-buffered points), noise wiring, errors."""
 from __future__ import annotations
 
-import sys
-import types
-
 import numpy as np
 import pytest
 
@@ -140,9 +137,8 @@ def test_noise_goes_through_datasets_noise_on_the_prior_only(tmp_path, monkeypat
         calls.append((depth.copy(), valid.copy(), kind, severity, seed))
         return depth + 1.0, valid
 
-    fake = types.ModuleType("gsbench.datasets.noise")
-    fake.apply_noise = fake_apply_noise
-    monkeypatch.setitem(sys.modules, "gsbench.datasets.noise", fake)
+    import gsbench.priors.depth as PD
+    monkeypatch.setattr(PD, "apply_noise", fake_apply_noise)   # where the depth prior looks it up
     scene = make_sphere_scene(2, 32, 24)
     cfg = {"depth": {"provider": "gt", "noise": {"type": "gaussian", "severity": 3}}}
     clean = prepare_priors(scene, {"depth": {"provider": "gt"}}, [0, 1], (32, 24), tmp_path, True, False, False,

@@ -7,10 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from gsbench.config import load_config, resolve_for_scene
+from gsbench.config import load_config
 from gsbench.errors import InputError
 from gsbench.methods import registry
 from gsbench.methods.base import Method
+from gsbench.methods.registry import resolve_for_scene
 
 
 class DummyMethod(Method):
@@ -28,11 +29,15 @@ def _resolve_dummy(cfg: dict, scene, drop) -> None:
     drop("priors.depth", "method dummy-test needs no priors")
 
 
+def _uses_dummy(cfg: dict) -> dict:
+    return {"depth_prior": False, "semantics": False}
+
+
 @pytest.fixture
 def dummy():
     spec = registry.register(registry.MethodSpec(
         name="dummy-test", target=f"{__name__}:DummyMethod", label="Dummy", section=None,
-        resolve=_resolve_dummy, uses=lambda cfg: {"depth_prior": False, "semantics": False}))
+        resolve=f"{__name__}:_resolve_dummy", uses=f"{__name__}:_uses_dummy"))
     yield spec
     registry.unregister("dummy-test")
 
@@ -89,9 +94,19 @@ def test_a_name_registers_once(dummy):
         registry.register(dummy)
 
 
+def test_a_spec_names_its_code_as_strings():
+    """Specs are data (gsbench/method_table.py, ground floor): a callable is refused, not stored."""
+    with pytest.raises(ValueError, match="resolve must be 'module:attribute'"):
+        registry.register(registry.MethodSpec(name="callable-test", target=f"{__name__}:DummyMethod", label="x",
+                                              section=None, resolve=_resolve_dummy,  # type: ignore[arg-type]
+                                              uses=f"{__name__}:_uses_dummy"))
+    assert "callable-test" not in registry.METHODS
+
+
 def test_a_class_whose_name_disagrees_is_refused():
     registry.register(registry.MethodSpec(name="other-name", target=f"{__name__}:DummyMethod", label="x",
-                                          section=None, resolve=_resolve_dummy, uses=lambda c: {}))
+                                          section=None, resolve=f"{__name__}:_resolve_dummy",
+                                          uses=f"{__name__}:_uses_dummy"))
     try:
         with pytest.raises(TypeError, match="registered as 'other-name'"):
             registry.get_method("other-name")
@@ -124,8 +139,8 @@ CONFIGS = [
 @pytest.mark.parametrize("method", ["vanilla", "twostage", "gaussiands"])
 def test_fit_asks_for_the_priors_the_grid_prepares(method, overrides, tiny_scene, tmp_path, monkeypatch):
     """What fit() passes to prepare_priors is what the grid's request says (vanilla: nothing at all)."""
-    import gsbench.priors as P
-    from gsbench.methods.base import training_size
+    import gsbench.methods.common as P  # where fit_priors looks prepare_priors up
+    from gsbench.scene import training_size
     assert set(registry.METHODS) >= {"vanilla", "twostage", "gaussiands"}
     cache = tmp_path / "cache"
     cfg = load_config(method, "cpu-small", ["train.iterations=1", "train.eval_views=0", "backend=torch",

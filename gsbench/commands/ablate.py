@@ -9,7 +9,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from gsbench import grids
+from gsbench.config import parse_overrides, set_args
 from gsbench.errors import InputError
+from gsbench.grids.executors import make_executor
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,8 +43,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def grid_from_args(args: argparse.Namespace):
     """The grid this command runs: the grid file with every --set applied to its base (None without --grid)."""
-    from gsbench import grids
-    from gsbench.config import parse_overrides, set_args
     extra = parse_overrides(set_args(args.overrides))
     if not args.grid:
         if extra:
@@ -51,7 +52,6 @@ def grid_from_args(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench import grids
     if args.list:
         for name in grids.shipped_grids():
             g = grids.load_grid(name)
@@ -75,7 +75,6 @@ def run(args: argparse.Namespace) -> int:
             )
         print(f"{len(grid.cells())} cells")
         return 0
-    from gsbench.grids.executors import make_executor
     slurm = {"slurm_partition": args.slurm_partition, "timeout_min": args.timeout_min,
              "cpus_per_task": args.cpus_per_task, "gpus_per_node": args.gpus_per_node}
     if args.cluster != "slurm":

@@ -16,7 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench.collect import collect, write_collected
+    from gsbench.collect import collect, write_collected  # lazy: start-up (cli loads all commands)
 
     df = collect(args.runs_dir)
     for w in df.attrs.get("warnings", []):

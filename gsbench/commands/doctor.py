@@ -11,6 +11,10 @@ import argparse
 import os
 import platform
 
+from gsbench.config import load_config
+from gsbench.errors import InputError
+from gsbench.render.gsplat_ext import NEEDS_BUILD, build_gsplat_extension, gsplat_status
+
 PRESETS = ("default", "cpu-small", "cpu-medium", "paper")
 
 
@@ -37,7 +41,6 @@ def _torch_lines() -> list[str]:
 
 
 def _gsplat_lines() -> list[str]:
-    from gsbench.render.gsplat_ext import NEEDS_BUILD, gsplat_status
     st = gsplat_status()
     env = ", ".join(f"{k}={os.environ[k]}" for k in ("MAX_JOBS", "TORCH_CUDA_ARCH_LIST") if k in os.environ)
     lines = [f"gsplat   {st.version or '-'}: {st.state}: {st.detail}"]
@@ -55,7 +58,7 @@ def _numba_lines() -> list[str]:
     except ImportError as e:
         return [f"numba    not importable ({e}): the cpu backend is unavailable"]
     try:
-        import gsbench.render.cpu_backend  # noqa: F401
+        import gsbench.render.cpu_backend  # lazy: optional (numba probe)  # noqa: F401
         state = "the cpu backend imports"
     except ImportError as e:
         state = f"the cpu backend does not import ({e})"
@@ -63,9 +66,7 @@ def _numba_lines() -> list[str]:
 
 
 def _auto_lines() -> list[str]:
-    from gsbench.config import load_config
-    from gsbench.errors import InputError
-    from gsbench.methods.device import resolve_backend_for, resolve_device
+    from gsbench.methods.device import resolve_backend_for, resolve_device  # lazy: start-up (cli loads all commands)
     lines = ["auto picks (train.device and backend as each preset sets them):"]
     for preset in PRESETS:
         cfg = load_config("gaussiands", None if preset == "default" else preset, [])
@@ -81,7 +82,6 @@ def _auto_lines() -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     if args.build_gsplat:
-        from gsbench.render.gsplat_ext import build_gsplat_extension
         build_gsplat_extension()
     for line in _torch_lines() + _gsplat_lines() + _numba_lines() + _auto_lines():
         print(line)

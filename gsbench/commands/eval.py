@@ -26,7 +26,7 @@ def _fmt(v) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench import evaluation as evaluate
+    from gsbench import evaluation as evaluate  # lazy: start-up (cli loads all commands)
     if args.masks is not None:
         if args.run_dir is not None:
             raise InputError("give either RUN_DIR or --masks, not both")

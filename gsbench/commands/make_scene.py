@@ -6,7 +6,7 @@ import time
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from gsbench.datasets.synthetic import LAYOUT_CHOICES, PRESETS
+    from gsbench.datasets.synthetic import LAYOUT_CHOICES, PRESETS  # lazy: start-up (cli loads all commands)
 
     parser.add_argument("--preset", required=True, choices=sorted(PRESETS), help="scene preset")
     parser.add_argument("--out", required=True, help="output folder (must not exist or be empty)")
@@ -22,8 +22,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench.datasets import load_scene
-    from gsbench.datasets.synthetic import make_scene, parse_resolution
+    from gsbench.datasets import load_scene  # lazy: start-up (cli loads all commands)
+    from gsbench.datasets.synthetic import make_scene, parse_resolution  # lazy: start-up (cli loads all commands)
 
     res = parse_resolution(args.resolution) if args.resolution else None
     t0 = time.perf_counter()

@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gsbench.errors import InputError
+from gsbench.store import write_json_atomic
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", type=Path, help="scene folder with poses (sparse/0 without points, "
@@ -18,11 +21,9 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     import pycolmap
 
-    from gsbench.datasets import load_scene
-    from gsbench.datasets.colmap import find_model_dir
-    from gsbench.datasets.triangulate import triangulate_scene, write_points
-    from gsbench.errors import InputError
-    from gsbench.store import write_json_atomic
+    from gsbench.datasets import load_scene  # lazy: start-up (cli loads all commands)
+    from gsbench.datasets.colmap import find_model_dir  # lazy: start-up (cli loads all commands)
+    from gsbench.datasets.triangulate import triangulate_scene, write_points  # lazy: start-up (cli loads all commands)
 
     pycolmap.logging.minloglevel = pycolmap.logging.WARNING  # COLMAP's per-image INFO lines would bury the summary
     scene = load_scene(args.scene, layout=args.layout)

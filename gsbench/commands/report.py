@@ -7,6 +7,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from gsbench.errors import InputError
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs_dir", type=Path,
@@ -18,8 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench.errors import InputError
-    from gsbench.reports.build import build_report
+    from gsbench.reports.build import build_report  # lazy: start-up (cli loads all commands)
 
     summary = build_report(args.runs_dir, args.out, progress=not args.no_progress)
     unknown = [t for t in args.print_tables if t not in summary.tables]

@@ -8,6 +8,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from gsbench.store import write_text_atomic
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=None, help="folder for stress.csv (default: print only)")
@@ -39,8 +41,7 @@ def format_table(rows: list[dict]) -> str:
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
-    from gsbench.store import write_text_atomic
-    from gsbench.stress import all_cases, run_case
+    from gsbench.stress import all_cases, run_case  # lazy: start-up (cli loads all commands)
 
     cases, skipped = all_cases(args.component)
     if args.list:

@@ -4,7 +4,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from gsbench.methods.registry import METHODS
+from gsbench.config import load_config, set_args
+from gsbench.method_table import METHODS
+from gsbench.store import read_json
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -20,13 +22,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def config_from_args(args: argparse.Namespace) -> dict:
     """The config this command trains with (default <- --preset <- every --set)."""
-    from gsbench.config import load_config, set_args
     return load_config(args.method, args.preset, set_args(args.overrides))
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench.runs import train_run
-    from gsbench.store import read_json
+    from gsbench.runs import train_run  # lazy: start-up (cli loads all commands)
 
     cfg = config_from_args(args)
     out = train_run(cfg, Path(args.scene), Path(args.out), progress=not args.no_progress)

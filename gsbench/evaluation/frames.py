@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
 from gsbench.results import FRAME_SETS
+from gsbench.scene import training_size
 
 RESOLUTIONS = ("reference", "train")
 
@@ -56,7 +57,6 @@ def view_name(scene, i: int) -> str:
 
 def train_camera(camera, max_width):
     """The camera at the training resolution (train.max_width, the rule training uses)."""
-    from gsbench.methods.base import training_size
     w, h = training_size(camera, max_width)
     return camera if (w, h) == (camera.width, camera.height) else camera.resized(w, h)
 

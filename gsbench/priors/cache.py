@@ -19,6 +19,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from gsbench.datasets import scene_fingerprint
 from gsbench.store import read_json, write_json_atomic
 
 CACHE_VERSION = 1
@@ -47,14 +48,10 @@ def cache_key(part: str, provider: str | None, version: int, params: Mapping, co
 
 
 def scene_content_hash(scene) -> str:
-    """The scene's content hash: `gsbench.datasets.scene_fingerprint` when available, else a hash
-    of the image files' bytes, the cameras, and the GT files' presence (a fallback that still
-    changes whenever an image or a camera does)."""
-    try:
-        from gsbench.datasets import scene_fingerprint
-    except ImportError:
-        scene_fingerprint = None
-    if scene_fingerprint is not None and scene.path and Path(scene.path).exists():
+    """The scene's content hash: `gsbench.datasets.scene_fingerprint` when the scene has a folder,
+    else a hash of the image files' bytes, the cameras, and the GT files' presence (a fallback that
+    still changes whenever an image or a camera does)."""
+    if scene.path and Path(scene.path).exists():
         return "fp:" + str(scene_fingerprint(scene.path))
     h = hashlib.sha256()
     for cam in scene.cameras:

@@ -35,6 +35,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from gsbench.config import check_key
+from gsbench.datasets.noise import apply_noise
 from gsbench.errors import InputError
 from gsbench.priors import warp as W
 from gsbench.priors.weights import require_weights
@@ -220,7 +221,6 @@ def apply_depth_noise(priors: Mapping[int, DepthPrior], noise_cfg: Mapping | Non
     """The priors with `gsbench.datasets.noise.apply_noise` applied per view (depth prior only)."""
     if not noise_cfg or not noise_cfg.get("type"):
         return dict(priors)
-    from gsbench.datasets.noise import apply_noise
     kind = str(noise_cfg["type"])
     severity = int(noise_cfg.get("severity", 0))
     suffix = noise_suffix(noise_cfg)

@@ -24,6 +24,8 @@ import numpy as np
 
 from gsbench.errors import InputError
 from gsbench.priors import clipspace as C
+from gsbench.priors.labels import label_view
+from gsbench.priors.warp import resize_nearest
 from gsbench.priors.weights import require_weights
 
 FEATURE_DIM = C.DIM
@@ -79,8 +81,6 @@ def named_class_map(scene, view: int, size: tuple[int, int]) -> tuple[np.ndarray
     From 3D-OVS class masks, else instance maps with instance classes (synthetic scenes), else LERF
     label polygons (categories). The map is None when the view has no labels: its masks get no
     feature, hence no semantic target."""
-    from gsbench.priors.labels import label_view
-    from gsbench.priors.warp import resize_nearest
     if scene.has_semantics:
         c = scene.gt_classes(view)
         return (None if c is None else resize_nearest(np.asarray(c).astype(np.int64), size)), list(scene.class_names)

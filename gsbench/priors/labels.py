@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from gsbench.datasets.ovs import polygons_to_mask
 from gsbench.errors import InputError
 from gsbench.priors.warp import resize_nearest
 
@@ -77,7 +78,6 @@ def _components(classes: np.ndarray, n_classes: int) -> np.ndarray:
 
 
 def _lerf_view(scene, view: int, size: tuple[int, int]) -> LabelledView | None:
-    from gsbench.datasets.ovs import polygons_to_mask
     raw = getattr(scene, "raw_labels", {}).get(view)
     if raw is not None:
         lw, lh = scene.label_sizes[view]

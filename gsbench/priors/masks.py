@@ -23,6 +23,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from gsbench.errors import InputError
+from gsbench.priors.warp import resize_nearest
 from gsbench.priors.weights import require_weights
 
 SIM_VERSION = 2
@@ -30,7 +31,6 @@ SIM_VERSION = 2
 
 def gt_instance_map(scene, view: int, size: tuple[int, int]) -> np.ndarray:
     """GT instance ids of `view` at `size` (nearest), int32 with -1 none."""
-    from gsbench.priors.warp import resize_nearest
     inst = scene.gt_instances(view)
     if inst is None:
         raise InputError(f"{scene.path}: scene has no GT instances (needed by priors.masks.provider=gt|simulated)")

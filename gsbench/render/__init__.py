@@ -26,6 +26,7 @@ import torch
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.render.projection import Projected, project_gaussians
+from gsbench.render.torch_backend import rasterize_torch
 from gsbench.scene import Camera
 
 BACKENDS = ("torch", "cpu", "gsplat")
@@ -53,10 +54,9 @@ def resolve_backend(backend: str, device: torch.device) -> str:
 
 def _rasterizer(name: str) -> Callable:
     if name == "torch":
-        from gsbench.render.torch_backend import rasterize_torch
         return rasterize_torch
     if name == "cpu":
-        from gsbench.render.cpu_backend import rasterize_cpu
+        from gsbench.render.cpu_backend import rasterize_cpu  # lazy: optional (numba)
         return rasterize_cpu
     raise ValueError(name)
 
@@ -87,12 +87,12 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
     device, dtype = field.means.device, field.means.dtype
     name = resolve_backend(backend, device)
     if name == "gsplat":
-        from gsbench.render.gsplat_backend import render_gsplat
+        from gsbench.render.gsplat_backend import render_gsplat  # lazy: optional (gsplat)
         return render_gsplat(field, camera, background=background)
     if name == "cpu":
         # fused numba projection + rasterization (gsbench/render/cpu_backend.py); means2d is a leaf
         # whose .grad the backward fills
-        from gsbench.render.cpu_backend import render_fused_cpu
+        from gsbench.render.cpu_backend import render_fused_cpu  # lazy: optional (numba)
         rgb, depth, feats, t_final, means2d, radii, n_visible = render_fused_cpu(field, camera)
     else:
         out, t_final, means2d, radii, n_visible = _render_projected(field, camera, name)

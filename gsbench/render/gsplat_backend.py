@@ -31,7 +31,7 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
-from gsbench.render import rules
+from gsbench.render import RenderOutput, rules  # gsbench.render imports this module only when rendering
 from gsbench.scene import Camera
 
 RENDER_MODE = "RGB+D"
@@ -104,7 +104,6 @@ def _means2d_with_grad(m2d: torch.Tensor) -> torch.Tensor:
 
 def render_gsplat(field: GaussianField, camera: Camera, background: Optional[torch.Tensor] = None):
     """Render with gsplat.rasterization; same outputs as the other backends (see module doc)."""
-    from gsbench.render import RenderOutput  # local: gsbench.render imports this module lazily
 
     gsplat = _import_gsplat()
     if not torch.cuda.is_available():

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from gsbench.methods.losses import depth_loss, solve_scale_shift
 from gsbench.stress.core import Case, CaseResult, _depth_pair, _grads, _leaf, all_finite, compare, scaled_err
 
 
@@ -22,7 +23,6 @@ def _lstsq_reference(prior: np.ndarray, target: np.ndarray, valid: np.ndarray) -
 
 def depth_solve_cases() -> list[Case]:
     """solve_scale_shift (float32 inputs) vs numpy lstsq in float64; degenerate priors skip as documented."""
-    from gsbench.methods.losses import depth_loss, solve_scale_shift
 
     comp = "depth-solve"
 

@@ -11,6 +11,17 @@ from gsbench.gaussians import GaussianField
 
 from gsbench.stress.core import (Case, CaseResult, _camera, _depth_pair, _field, _grads, _images, _leaf,  # isort: skip
                                  _result, all_finite)
+from gsbench.methods.autoencoder import FeatureAutoencoder
+from gsbench.methods.losses import (
+    DEPTH_FORMULATIONS,
+    depth_edges,
+    depth_loss,
+    ds_loss,
+    reconstruction_loss,
+    sem_loss,
+    tv_loss,
+)
+from gsbench.render import render
 
 
 def _loss_case(comp: str, fn: Callable[..., Optional[torch.Tensor]], inputs: list, grad_mask: list[bool],
@@ -42,9 +53,6 @@ def _loss_case(comp: str, fn: Callable[..., Optional[torch.Tensor]], inputs: lis
 
 def loss_cases() -> list[Case]:
     """Each training loss in float32 vs float64 on regular and extreme inputs (gradients included)."""
-    from gsbench.methods.losses import (DEPTH_FORMULATIONS, depth_edges, depth_loss, ds_loss,  # isort: skip
-                                        reconstruction_loss, sem_loss, tv_loss)
-
     cases: list[Case] = []
 
     def add(comp, name, fn):
@@ -171,8 +179,6 @@ def loss_cases() -> list[Case]:
 # ---------------------------------------------------------------------------- stiff loss weights
 def stiff_lambda_cases() -> list[Case]:
     """The GaussianDS total loss on a real render with lambdas spanning 1e-4..1e4: finite and float32 ~ float64."""
-    from gsbench.methods.losses import depth_edges, depth_loss, ds_loss, reconstruction_loss, sem_loss, tv_loss
-    from gsbench.render import render
 
     cam = _camera(24, 24)
     rng = np.random.default_rng(5)
@@ -226,7 +232,6 @@ def stiff_lambda_cases() -> list[Case]:
 # ---------------------------------------------------------------------------- autoencoder
 def autoencoder_cases() -> list[Case]:
     """The frozen feature autoencoder: finite, unit-norm latents and reconstructions, float32 ~ float64."""
-    from gsbench.methods.autoencoder import FeatureAutoencoder
 
     def case(make_x: Callable[[], torch.Tensor], latent_dim: int = 3, tol: float = 1e-4) -> CaseResult:
         with torch.random.fork_rng(devices=[]):

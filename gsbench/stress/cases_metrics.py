@@ -6,13 +6,13 @@ from typing import Callable
 
 import numpy as np
 
+from gsbench import metrics as M
+from gsbench.errors import InputError
 from gsbench.stress.core import Case, CaseResult, _result, all_finite
 
 
 def metric_cases() -> list[Case]:
     """Metrics on degenerate inputs: hand-computed values, defined behaviour for tiny images, float32 ~ float64."""
-    from gsbench import metrics as M
-    from gsbench.errors import InputError
 
     comp = "metrics"
 

@@ -8,6 +8,9 @@ import numpy as np
 import torch
 
 from gsbench.gaussians import GaussianField
+from gsbench.render import render
+from gsbench.render.gsplat_ext import build_gsplat_extension, gsplat_status
+from gsbench.render.projection import project_gaussians
 from gsbench.scene import Camera
 from gsbench.stress.core import Case, CaseResult, _camera, _field, _grads, _result, _to_np, all_finite, compare
 
@@ -22,12 +25,11 @@ def _zero_quats(n: int) -> dict:
 def available_backends() -> list[str]:
     names = ["torch"]
     try:
-        import gsbench.render.cpu_backend  # noqa: F401
+        import gsbench.render.cpu_backend  # lazy: optional (numba probe)  # noqa: F401
         names.append("cpu")
     except ImportError:
         pass
     if torch.cuda.is_available():
-        from gsbench.render.gsplat_ext import build_gsplat_extension, gsplat_status
         if gsplat_status().usable:      # importable is not enough: its CUDA extension must load (or build)
             build_gsplat_extension()    # the one-time compile, announced, before any case is timed
             names.append("gsplat")
@@ -37,7 +39,6 @@ def available_backends() -> list[str]:
 def _render_case(backend: str, params: dict, camera: Camera, out_tol: float = 1e-4, grad_tol: float = 1e-2,
                  check_grad: bool = True) -> CaseResult:
     """float32 render on `backend` vs float64 torch reference; gradients of a fixed weighted sum."""
-    from gsbench.render import render
 
     def run(dtype, be):
         device = "cuda" if be == "gsplat" else "cpu"
@@ -141,7 +142,6 @@ def render_cases(backends: Iterable[str]) -> list[Case]:
 # ---------------------------------------------------------------------------- projection
 def projection_cases() -> list[Case]:
     """project_gaussians in float32 against float64: same culling, means2d, 2D covariance, depths, gradients."""
-    from gsbench.render.projection import project_gaussians
 
     def case(params_fn, cam_fn=_camera, tol: float = 1e-4, grad_tol: float = 1e-3) -> CaseResult:
         params = params_fn()

@@ -23,7 +23,7 @@ from gsbench.methods.common import fit_priors, run_trainer, uses
 from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, normalised_depth,  # isort: skip
                                     reconstruction_loss, sem_loss, tv_loss)
 from gsbench.methods.semantic import build_targets, fit_autoencoder
-from gsbench.methods.trainer import LossResult
+from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
 
 
 class GaussianDS(Method):
@@ -43,7 +43,6 @@ class GaussianDS(Method):
         self.info["priors_stats"] = dict(pri.stats)
         self.info["priors_skipped"] = dict(pri.skipped)
 
-        from gsbench.methods.trainer import load_checkpoint_if_any
         ckpt = load_checkpoint_if_any(run_dir)
         # ---- semantics: autoencoder (trained once, frozen; restored on resume) and per-pixel targets
         targets = None
