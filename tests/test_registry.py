@@ -200,6 +200,6 @@ def test_the_grid_entry_is_a_cache_hit_for_fit(tiny_scene, tmp_path):
     assert not any(v["hit"] for v in first.cache.values())
     resolved, _ = resolve_for_scene(cfg, tiny_scene)
     again = fit_priors(tiny_scene, resolved, tmp_path / "run", progress=False)
-    assert set(again.cache) == {"depth", "masks", "features"}
+    assert set(again.cache) == {"depth", "masks", "mask-stats", "features"}
     assert all(v["hit"] for v in again.cache.values())
     assert {k: v["key"] for k, v in again.cache.items()} == {k: v["key"] for k, v in first.cache.items()}

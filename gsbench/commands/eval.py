@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from gsbench.errors import InputError
+from gsbench.previews import PREVIEWS_DIR, read_manifest
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -54,7 +55,6 @@ def run(args: argparse.Namespace) -> int:
               + ", ".join(res["missing"]["files"][:10]) + (" ..." if res["missing"]["count"] > 10 else ""))
     print(f"wrote {Path(out) / 'results.json'}")
     if args.masks is None:
-        from gsbench.previews import PREVIEWS_DIR, read_manifest
         m = read_manifest(args.run_dir)
         if m is not None:
             print(f"wrote {Path(out) / PREVIEWS_DIR} ({len(m['frames'])} frames, {len(m['removal'])} removal views "

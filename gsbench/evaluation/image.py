@@ -13,6 +13,7 @@ import logging
 
 import numpy as np
 
+from gsbench.datasets.imageio import resize_rgb
 from gsbench.errors import InputError
 
 from .block import Block, to_numpy
@@ -26,7 +27,6 @@ LPIPS_FORMS = {"lpips": "3dgs-[0,1]", "lpips_package": "lpips-[-1,1]"}
 
 def resize_image(img: np.ndarray, width: int, height: int) -> np.ndarray:
     """A GT image at the evaluation size, resized as training loads it (3DGS's PIL bicubic on 8 bits)."""
-    from gsbench.datasets.imageio import resize_rgb
     return resize_rgb(np.asarray(img, np.float32)[..., :3], width, height)
 
 

@@ -14,7 +14,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from gsbench.metrics import resize_nearest
+from gsbench.metrics import image as MI
+from gsbench.metrics import lerf, ovs3d, resize_nearest
 from gsbench.previews import remove_previews, write_previews
 
 from .block import to_numpy
@@ -69,7 +70,6 @@ def _depth_range(depth: np.ndarray, alpha: np.ndarray) -> list[float] | None:
 
 
 def _semantics_3dovs(method, scene, i: int, cam, config: dict, mode: str, feats: np.ndarray) -> tuple:
-    from gsbench.metrics import ovs3d
     classes = list(scene.class_names)
     text = to_numpy(method.embed_text(classes, mode))
     gt = class_masks(scene, i, classes, cam.width, cam.height) or {}
@@ -84,7 +84,6 @@ def _semantics_3dovs(method, scene, i: int, cam, config: dict, mode: str, feats:
 
 
 def _semantics_lerf(method, scene, i: int, cam, config: dict, mode: str, feats: np.ndarray) -> tuple:
-    from gsbench.metrics import lerf
     masks, boxes = scene_label_masks(scene, i, cam.width, cam.height)
     names = list(masks)
     if not names:
@@ -109,7 +108,6 @@ def _semantics_lerf(method, scene, i: int, cam, config: dict, mode: str, feats: 
 def frame_preview(method, scene, i: int, protocol: str, frame_set: str, config: dict, mode: str,
                   max_width: int) -> tuple[dict, dict]:
     """(manifest entry, arrays) of labelled view i under `protocol`."""
-    from gsbench.metrics import image as MI
     cam = segmentation_camera(scene, i, protocol, config)
     out = method.render(cam)
     rgb = np.clip(to_numpy(out.rgb), 0.0, 1.0)
