@@ -57,7 +57,9 @@ def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Ca
     cams = [views.eval_cameras[i] for i in ids]
 
     def _sem(fld: GaussianField) -> dict:
-        if fld.features is None or method.autoencoder is None:
+        probe = copy.copy(method)
+        probe.field = fld
+        if not probe.has_semantics:   # e.g. no latents yet, or no autoencoder yet (twostage's rgb phase)
             return {}
         try:   # build (and cache) the text encoder once, on the real method
             method.feature_provider()

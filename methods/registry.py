@@ -264,11 +264,38 @@ def _uses_gaussiands(cfg: dict) -> dict:
     return {"depth_prior": depth_terms, "semantics": bool(on["sem"] or on["ds"])}
 
 
-# registration order is the report order: the RGB baseline, the decoupled baseline, the reference
+def _resolve_grouping(cfg: dict, scene, drop: Drop) -> None:
+    on = cfg["grouping"]["losses"]
+    drop("priors.depth", "method grouping uses no depth prior (RGB + identity classification)")
+    drop("gaussiands.autoencoder", "method grouping has no autoencoder: queries go through the tracks' features")
+    ok, why = semantic_source(cfg, scene)
+    if not ok:
+        for k in ("identity", "reg3d"):
+            if on[k]:
+                on[k] = False
+                drop(f"grouping.losses.{k}", why)
+    if on["reg3d"] and not on["identity"]:
+        on["reg3d"] = False
+        drop("grouping.losses.reg3d", "the 3D regulariser acts on the identity classes (grouping.losses.identity off)")
+    if not on["identity"]:
+        reason = why if not ok else "nothing uses it (grouping.losses.identity is off)"
+        for part in ("priors.masks", "priors.features", "semantic_channels"):
+            drop(part, reason)
+
+
+def _uses_grouping(cfg: dict) -> dict:
+    return {"depth_prior": False, "semantics": bool(cfg["grouping"]["losses"]["identity"])}
+
+
+# registration order is the report order: the RGB baseline, the decoupled baseline, the joint
+# identity-grouping baseline, the reference
 register(MethodSpec(name="vanilla", target="gsbench.methods.vanilla:Vanilla", label="3DGS (vanilla)",
                     section=None, resolve=_resolve_vanilla, uses=_uses_vanilla))
 register(MethodSpec(name="twostage", target="gsbench.methods.twostage:TwoStage", label="Two-stage",
                     section="twostage", resolve=_resolve_twostage, uses=_uses_twostage, per_frame_masks=True))
+register(MethodSpec(name="grouping", target="gsbench.methods.grouping:GaussianGrouping",
+                    label="Gaussian Grouping (style)", section="grouping", resolve=_resolve_grouping,
+                    uses=_uses_grouping))
 register(MethodSpec(name="gaussiands", target="gsbench.methods.gaussiands:GaussianDS", label="GaussianDS",
                     section="gaussiands", resolve=_resolve_gaussiands, uses=_uses_gaussiands))
 
