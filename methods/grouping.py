@@ -23,6 +23,7 @@ probability for the best-matching track exceeds `grouping.removal_threshold` (0.
 """
 from __future__ import annotations
 
+import copy
 import logging
 import math
 from pathlib import Path
@@ -33,7 +34,7 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import SH_C0
-from gsbench.methods.base import Method, load_views, scene_init
+from gsbench.methods.base import Method, _check_mode, _unit, load_views, scene_init
 from gsbench.methods.common import fit_priors, semantic_eval, uses
 from gsbench.methods.losses import reconstruction_loss
 from gsbench.methods.trainer import LossResult, Trainer, load_checkpoint_if_any, periodic_eval
@@ -132,7 +133,6 @@ class GaussianGrouping(Method):
 
     def semantic_features(self, camera, mode: str = "encode") -> Optional[torch.Tensor]:
         """(H, W, 512): the feature of the track each pixel's rendered identity classifies into (both modes)."""
-        from gsbench.methods.base import _check_mode
         _check_mode(mode)
         if not self.has_semantics:
             return None
@@ -140,7 +140,6 @@ class GaussianGrouping(Method):
 
     def embed_text(self, texts: list[str], mode: str = "encode") -> Optional[torch.Tensor]:
         """(Q, 512) unit text embeddings of the feature provider (both modes: the tracks' feature space)."""
-        from gsbench.methods.base import _check_mode, _unit
         _check_mode(mode)
         if not self.has_semantics:
             return None
@@ -171,7 +170,6 @@ class GaussianGrouping(Method):
         with torch.no_grad():
             prob = torch.softmax(self.classifier(fld.features), dim=-1)
         drop = (prob[:, sel] > thr).any(-1) if sel else torch.zeros(fld.num, dtype=torch.bool, device=self.device)
-        import copy
         out = copy.copy(self)
         out.field = fld.subset(~drop)
         out.info = dict(self.info, removed_query=query, removal_rule=f"class probability > {thr:g}",
