@@ -166,6 +166,17 @@ RULES: dict[str, Rule] = {
     "gaussiands.edges.dilate": at_least(0),
     "gaussiands.min_valid_pixels": at_least(1),
     "twostage.semantic_iterations": at_least(1, kind="int", integer=True),  # null = train.iterations
+    # Gaussian Grouping-style baseline
+    "grouping.identity_dim": at_least(1),
+    "grouping.num_classes": at_least(2, integer=True, nullable=True),  # null = tracks + 1
+    "grouping.classifier_lr": positive(),
+    "grouping.lambdas.identity": at_least(0),
+    "grouping.lambdas.reg3d": at_least(0),
+    "grouping.reg3d.interval": at_least(1),
+    "grouping.reg3d.k": at_least(1),
+    "grouping.reg3d.sample_size": at_least(1),
+    "grouping.reg3d.max_points": at_least(1),
+    "grouping.removal_threshold": unit(),
     # queries and evaluation
     "query.mode": one_of(*QUERY_MODES),
     "removal.threshold": Rule(low=-1.0, high=1.0),

@@ -89,7 +89,8 @@ def method_sort_key(name: Any) -> tuple[int, str]:
     return (names.index(name) if name in names else len(names), str(name))
 
 
-# registration order is the report order: the RGB baseline, the decoupled baseline, the reference.
+# registration order is the report order: the RGB baseline, the decoupled baseline, the joint
+# identity-grouping baseline, the reference.
 # Their resolvers live in gsbench/methods/registry.py.
 _RULES = "gsbench.methods.registry"
 register(MethodSpec(name="vanilla", target="gsbench.methods.vanilla:Vanilla", label="3DGS (vanilla)",
@@ -97,6 +98,9 @@ register(MethodSpec(name="vanilla", target="gsbench.methods.vanilla:Vanilla", la
 register(MethodSpec(name="twostage", target="gsbench.methods.twostage:TwoStage", label="Two-stage",
                     section="twostage", resolve=f"{_RULES}:resolve_twostage", uses=f"{_RULES}:uses_twostage",
                     per_frame_masks=True))
+register(MethodSpec(name="grouping", target="gsbench.methods.grouping:GaussianGrouping",
+                    label="Gaussian Grouping (style)", section="grouping", resolve=f"{_RULES}:resolve_grouping",
+                    uses=f"{_RULES}:uses_grouping"))
 register(MethodSpec(name="gaussiands", target="gsbench.methods.gaussiands:GaussianDS", label="GaussianDS",
                     section="gaussiands", resolve=f"{_RULES}:resolve_gaussiands", uses=f"{_RULES}:uses_gaussiands"))
 

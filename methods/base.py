@@ -224,7 +224,11 @@ class Method:
                                              path, saved, dev, m._backend)
         prepare_backend(m._backend)
         m.info = st.get("info", {})
+        m._restore(st, dev)
         return m
+
+    def _restore(self, st: dict, device: torch.device) -> None:
+        """Restore what a subclass added to `state()` (called by `load`); the base adds nothing."""
 
 
 def _check_mode(mode: str) -> None:

@@ -53,7 +53,9 @@ def semantic_eval(method, scene, views: TrainViews, config: dict) -> Optional[Ca
     cams = [views.eval_cameras[i] for i in ids]
 
     def _sem(fld: GaussianField) -> dict:
-        if fld.features is None or method.autoencoder is None:
+        probe = copy.copy(method)
+        probe.field = fld
+        if not probe.has_semantics:   # e.g. no latents yet, or no autoencoder yet (twostage's rgb phase)
             return {}
         if scorer is None:
             return {"miou_skipped": "no segmentation scorer: fit() was not called through gsbench.runs.train_run"}

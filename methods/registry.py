@@ -202,8 +202,31 @@ def uses_gaussiands(cfg: dict) -> dict:
     return {"depth_prior": depth_terms, "semantics": bool(on["sem"] or on["ds"])}
 
 
+def resolve_grouping(cfg: dict, scene, drop: Drop) -> None:
+    on = cfg["grouping"]["losses"]
+    drop("priors.depth", "method grouping uses no depth prior (RGB + identity classification)")
+    drop("gaussiands.autoencoder", "method grouping has no autoencoder: queries go through the tracks' features")
+    ok, why = semantic_source(cfg, scene)
+    if not ok:
+        for k in ("identity", "reg3d"):
+            if on[k]:
+                on[k] = False
+                drop(f"grouping.losses.{k}", why)
+    if on["reg3d"] and not on["identity"]:
+        on["reg3d"] = False
+        drop("grouping.losses.reg3d", "the 3D regulariser acts on the identity classes (grouping.losses.identity off)")
+    if not on["identity"]:
+        reason = why if not ok else "nothing uses it (grouping.losses.identity is off)"
+        for part in ("priors.masks", "priors.features", "semantic_channels"):
+            drop(part, reason)
+
+
+def uses_grouping(cfg: dict) -> dict:
+    return {"depth_prior": False, "semantics": bool(cfg["grouping"]["losses"]["identity"])}
+
+
 __all__ = ["MethodSpec", "METHODS", "register", "unregister", "get_spec", "get_method", "method_sort_key", "uses",
            "load_target", "resolve_vanilla", "uses_vanilla", "resolve_twostage", "uses_twostage",
-           "resolve_gaussiands", "uses_gaussiands",
+           "resolve_gaussiands", "uses_gaussiands", "resolve_grouping", "uses_grouping",
            "resolve_for_scene", "priors_request", "build_priors_request", "depth_source", "semantic_source",
            "resolve_semantics"]

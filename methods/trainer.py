@@ -149,7 +149,8 @@ class Trainer:
                  iterations: Optional[int] = None, trainable: Optional[set[str]] = None, densify: bool = True,
                  backend: str = "torch", seed: int = 0, extra_state: Optional[Callable[[], dict]] = None,
                  eval_fn: Optional[Callable[[GaussianField], dict]] = None,
-                 device: Optional[torch.device] = None) -> None:
+                 device: Optional[torch.device] = None,
+                 extra_optimizer: Optional[torch.optim.Optimizer] = None) -> None:
         self.cfg = cfg
         self.tcfg = cfg["train"]
         self.views = views
@@ -163,6 +164,9 @@ class Trainer:
         self.seed = int(seed)
         self.extra_state = extra_state
         self.eval_fn = eval_fn
+        # a method's own module trained with the field (e.g. grouping's identity classifier): stepped
+        # right after the field's Adam, from the same backward pass; its state travels in extra_state
+        self.extra_optimizer = extra_optimizer
         lr = self.tcfg["lr"]
         self.device = torch.device(device) if device is not None else field.means.device
         lrs = {"means": lr["position_init"] * self.extent}
@@ -316,6 +320,8 @@ class Trainer:
             bad_step = torch.where((bad_step == 0) & ~torch.isfinite(tot), torch.full_like(bad_step, self.step),
                                    bad_step)
             self.ps.optimizer.zero_grad(set_to_none=True)
+            if self.extra_optimizer is not None:
+                self.extra_optimizer.zero_grad(set_to_none=True)
             with timed("backward"):
                 res.total.backward()
             with torch.no_grad():
@@ -327,6 +333,8 @@ class Trainer:
                 try:
                     with timed("optimiser"):
                         self.ps.optimizer.step()
+                        if self.extra_optimizer is not None:
+                            self.extra_optimizer.step()
                 except RuntimeError as e:   # e.g. Adam's lr / (1 - beta1) overflows float32 (lr ~1e38)
                     if "overflow" not in str(e):
                         raise

@@ -3,8 +3,8 @@ method, so a reader sees whether the methods compared had the same number of ste
 
 Source, in this order: the collected columns budget.<key> (results.json `budget` flattened by
 collect), the run's results.json `budget` dict, else the run's resolved config (train.iterations;
-semantic steps: twostage.semantic_iterations for twostage, every joint step for gaussiands, none for
-vanilla). The source is shown per row.
+semantic steps: twostage.semantic_iterations for twostage, every joint step for gaussiands and grouping,
+none for vanilla). The source is shown per row.
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from gsbench.reports.table import Cell, Column, Row, Table
 from gsbench.store import read_json
 
 log = logging.getLogger(__name__)
-JOINT_SEMANTICS = ("gaussiands",)  # the semantic field is optimised at every training step
+JOINT_SEMANTICS = ("gaussiands", "grouping")  # the semantic field is optimised at every training step
 NO_SEMANTICS = ("vanilla",)
 
 
@@ -92,6 +92,6 @@ def budget_table(res: Results) -> list[Table]:
             Column("source", "Source", "Source"), Column("runs", "Runs", "Runs")]
     return [Table("budgets", "Training budget per method",
                   "Training steps of each method per study: iterations (RGB / joint) and semantic steps "
-                  "(twostage: its semantic stage after the RGB stage; GaussianDS: every joint step trains the "
-                  "semantic field; vanilla: none).",
+                  "(twostage: its semantic stage after the RGB stage; GaussianDS and Gaussian Grouping: every "
+                  "joint step trains the semantic field; vanilla: none).",
                   ["Study", "Method"], cols, rows, section="budgets")]

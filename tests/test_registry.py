@@ -52,7 +52,7 @@ def tiny_scene(tmp_path_factory):
 
 # ---------------------------------------------------------------------------- one registration
 def test_builtin_methods_in_report_order():
-    assert tuple(registry.METHODS) == ("vanilla", "twostage", "gaussiands")
+    assert tuple(registry.METHODS) == ("vanilla", "twostage", "grouping", "gaussiands")
     for name in registry.METHODS:
         assert registry.get_method(name).name == name
 
@@ -136,7 +136,7 @@ CONFIGS = [
 
 
 @pytest.mark.parametrize("overrides", CONFIGS, ids=lambda o: ",".join(o) or "default")
-@pytest.mark.parametrize("method", ["vanilla", "twostage", "gaussiands"])
+@pytest.mark.parametrize("method", ["vanilla", "twostage", "grouping", "gaussiands"])
 def test_fit_asks_for_the_priors_the_grid_prepares(method, overrides, tiny_scene, tmp_path, monkeypatch):
     """What fit() passes to prepare_priors is what the grid's request says (vanilla: nothing at all)."""
     import gsbench.methods.common as P  # where fit_priors looks prepare_priors up
