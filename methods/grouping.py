@@ -131,12 +131,15 @@ class GaussianGrouping(Method):
         with torch.no_grad():
             return self.classifier(identity).argmax(-1)
 
-    def semantic_features(self, camera, mode: str = "encode") -> Optional[torch.Tensor]:
-        """(H, W, 512): the feature of the track each pixel's rendered identity classifies into (both modes)."""
-        _check_mode(mode)
+    def semantic_features_modes(self, camera, modes: tuple) -> dict:
+        """{mode: (H, W, 512)}: the feature of the track each pixel's rendered identity classifies into,
+        the same for both modes (no autoencoder), from one render."""
+        for m in modes:
+            _check_mode(m)
         if not self.has_semantics:
-            return None
-        return self.table[self.classify(self.render(camera).features)]
+            return {m: None for m in modes}
+        feats = self.table[self.classify(self.render(camera).features)]
+        return {m: feats for m in modes}
 
     def embed_text(self, texts: list[str], mode: str = "encode") -> Optional[torch.Tensor]:
         """(Q, 512) unit text embeddings of the feature provider (both modes: the tracks' feature space)."""

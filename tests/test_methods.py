@@ -213,7 +213,8 @@ def test_expon_lr_endpoints_and_midpoint():
 def _semantic_stub(scorer):
     """A semantic method, scene and views reduced to what methods.common.semantic_eval reads."""
     from types import SimpleNamespace
-    method = SimpleNamespace(autoencoder=object(), feature_provider=lambda: None, segmentation_scorer=scorer)
+    method = SimpleNamespace(autoencoder=object(), has_semantics=True, feature_provider=lambda: None,
+                             segmentation_scorer=scorer)
     scene = SimpleNamespace(has_semantics=True, has_labels=False)
     views = SimpleNamespace(eval_cameras={3: "cam3", 1: "cam1"})
     field = SimpleNamespace(features=torch.zeros(2, 3))
