@@ -30,7 +30,9 @@ from gsbench.errors import InputError
 
 CONFIG_DIR = Path(__file__).parent / "configs"
 # keys that do not change what a run computes (where files go, how often it logs)
-NON_RESULT_KEYS = (("priors", "cache_dir"),)
+# keys that change where things are kept, not the results: left out of the run id (a run trained with
+# train.data_on=device resumes with host, and the other way round)
+NON_RESULT_KEYS = (("priors", "cache_dir"), ("train", "data_on"))
 _NO_DEFAULT = object()
 
 

@@ -88,6 +88,7 @@ QUERY_MODES = ("encode", "decode")
 PROTOCOLS = ("auto", "lerf", "3dovs")
 LPIPS_NETS = ("vgg", "alex")
 HOLDOUTS = ("every-8", "none")
+DATA_PLACES = ("device", "host")   # train.data_on: where per-view training data lives (methods/residency.py)
 EVAL_RESOLUTIONS = ("reference", "train")
 LERF_KERNEL_MODES = ("auto", "reference")
 
@@ -99,6 +100,7 @@ RULES: dict[str, Rule] = {
     "train.iterations": at_least(1),
     "train.holdout": one_of(*HOLDOUTS),
     "train.max_width": at_least(1, kind="int", integer=True),
+    "train.data_on": one_of(*DATA_PLACES),
     "train.sh_degree": Rule(low=0, high=3),
     "train.sh_increase_every": at_least(0),
     "train.lr.color_rest_factor": positive(),

@@ -32,6 +32,7 @@ from gsbench.methods.autoencoder import FeatureAutoencoder
 from gsbench.methods.common import resolve_render_backend
 from gsbench.methods.device import prepare_backend, resolve_backend_for, resolve_device
 from gsbench.methods.registry import get_method
+from gsbench.methods.residency import DEVICE, data_on, place
 from gsbench.methods.trainer import TrainViews, init_field
 from gsbench.priors import get_feature_provider
 from gsbench.render import RenderOutput, render
@@ -239,7 +240,8 @@ def _check_mode(mode: str) -> None:
 # ---------------------------------------------------------------------------- shared data preparation
 def load_views(scene, config: dict, progress: bool = False,
                device: torch.device | str = "cpu") -> tuple[TrainViews, tuple[int, int]]:
-    """Train cameras/images at the training resolution (images on `device`, copied once), plus the
+    """Train cameras/images at the training resolution (images on `device`, copied once, or on the host
+    with train.data_on=host), plus the
     first `eval_views` test views."""
     tcfg = config["train"]
     train_ids, test_ids = split_ids(scene, config)
@@ -254,7 +256,7 @@ def load_views(scene, config: dict, progress: bool = False,
                              f"got shape {img.shape}")
         img = img[..., :3]
         img = resize_rgb(img, W, H)        # 3DGS's rule: PIL bicubic on the 8-bit image
-        return scene.cameras[i].resized(W, H), torch.from_numpy(np.clip(img, 0.0, 1.0).copy()).to(device)
+        return scene.cameras[i].resized(W, H), torch.from_numpy(np.clip(img, 0.0, 1.0).copy())
 
     views = TrainViews({}, {})
     for i in train_ids:
@@ -266,6 +268,8 @@ def load_views(scene, config: dict, progress: bool = False,
                 for j in np.unique(np.linspace(0, len(test) - 1, min(n_eval, len(test))).round().astype(int))]
         for i in pick:
             views.eval_cameras[i], views.eval_images[i] = load(i)
+    on = data_on(config)     # the periodic-eval images are few: they stay on the device
+    views.images, views.eval_images = place(views.images, device, on), place(views.eval_images, device, DEVICE)
     return views, (W, H)
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 import copy
 import logging
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Optional
 
@@ -37,6 +38,7 @@ from gsbench.gaussians import SH_C0
 from gsbench.methods.base import Method, _check_mode, _unit, load_views, scene_init
 from gsbench.methods.common import fit_priors, semantic_eval, uses
 from gsbench.methods.losses import reconstruction_loss
+from gsbench.methods.residency import data_on, place
 from gsbench.methods.trainer import LossResult, Trainer, load_checkpoint_if_any, periodic_eval
 
 log = logging.getLogger(__name__)
@@ -210,7 +212,7 @@ class GaussianGrouping(Method):
         ckpt = load_checkpoint_if_any(run_dir)
         dim = int(g["identity_dim"]) if semantic else 0
         C = 0
-        targets: dict[int, torch.Tensor] = {}
+        targets: Mapping[int, torch.Tensor] = {}
         if semantic:
             pri = fit_priors(scene, config, run_dir, progress=progress)
             self.providers = dict(pri.providers)
@@ -226,7 +228,8 @@ class GaussianGrouping(Method):
                 m = np.asarray(pri.masks[v])
                 if m.shape != (H, W):
                     raise ValueError(f"mask of view {v} has shape {m.shape}, expected {(H, W)} (training resolution)")
-                targets[v] = torch.as_tensor(class_map(m, self.tracks)).reshape(-1).to(dev)
+                targets[v] = torch.as_tensor(class_map(m, self.tracks)).reshape(-1)
+            targets = place(targets, dev, data_on(config))
             with torch.random.fork_rng(devices=[]):
                 torch.manual_seed(seed)
                 self.classifier = torch.nn.Linear(dim, C).to(dev)

@@ -11,6 +11,7 @@ import numpy as np
 import torch
 
 from gsbench.methods.autoencoder import FeatureAutoencoder, train_autoencoder
+from gsbench.methods.residency import DEVICE, place
 
 
 @dataclass
@@ -30,8 +31,9 @@ def fit_autoencoder(mask_features: dict, ae_cfg: dict, latent_dim: int, seed: in
 
 
 def build_targets(masks: dict, mask_features: dict, ae: FeatureAutoencoder, sizes: dict[int, tuple[int, int]],
-                  device: torch.device | str = "cpu") -> SemanticTargets:
-    """Per-view latent target maps (built once, then kept on `device`). `sizes`: view id -> (W, H)."""
+                  device: torch.device | str = "cpu", on: str = DEVICE) -> SemanticTargets:
+    """Per-view latent target maps (built once, then kept on `device`, or on the host with on="host":
+    methods/residency.py). `sizes`: view id -> (W, H)."""
     lat, has = {}, {}
     for v, (W, H) in sizes.items():
         m = masks.get(v)
@@ -53,5 +55,5 @@ def build_targets(masks: dict, mask_features: dict, ae: FeatureAutoencoder, size
                     sel = mt == t
                     S[sel] = z[j]
                     hv |= sel
-        lat[v], has[v] = S.to(device), hv.to(device)
-    return SemanticTargets(lat, has)
+        lat[v], has[v] = S, hv
+    return SemanticTargets(place(lat, device, on), place(has, device, on))

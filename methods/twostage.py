@@ -15,6 +15,7 @@ import torch
 from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import fit_priors, run_trainer, uses
 from gsbench.methods.losses import sem_loss
+from gsbench.methods.residency import data_on
 from gsbench.methods.semantic import build_targets, fit_autoencoder
 from gsbench.methods.trainer import LossResult, field_from_params, load_checkpoint_if_any
 from gsbench.methods.vanilla import rgb_loss_fn
@@ -67,7 +68,8 @@ class TwoStage(Method):
             ae.load_state_dict(ae_state)
         self.autoencoder = ae.to(dev)
         self.info["autoencoder"] = ae_stats
-        targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids}, device=dev)
+        targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids}, device=dev,
+                                on=data_on(config))
         has_any = {v: bool(targets.has_target[v].any()) for v in train_ids}
         if rgb_field is None:
             sem_field0 = field_from_params(ckpt["params"])

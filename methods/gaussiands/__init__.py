@@ -22,6 +22,7 @@ from gsbench.methods.common import fit_priors, run_trainer, uses
 
 from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, normalised_depth,  # isort: skip
                                     reconstruction_loss, sem_loss, tv_loss)
+from gsbench.methods.residency import data_on, place
 from gsbench.methods.semantic import build_targets, fit_autoencoder
 from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
 
@@ -57,7 +58,8 @@ class GaussianDS(Method):
                 ae.load_state_dict(ae_state)
             self.autoencoder = ae.to(dev)
             self.info["autoencoder"] = ae_stats
-            targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids}, device=dev)
+            targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids}, device=dev,
+                                    on=data_on(config))
         # ---- depth prior and its edges E_d (invariant to the per-iteration affine alignment, see losses.py)
         depth = pri.depth if use["depth_prior"] else None
         edges = {}
@@ -70,14 +72,16 @@ class GaussianDS(Method):
                                                        int(e["dilate"])))
             self.info["edge_fraction"] = (float(np.mean([float(x.float().mean()) for x in edges.values()]))
                                           if edges else 0.0)
-            edges = {v: x.to(dev) for v, x in edges.items()}
-        # the depth prior on the device once: values (float32), validity (finite and valid), its kind
+            edges = place(edges, dev, data_on(config))
+        # the depth prior on the device once (or on the host: train.data_on): values (float32), validity
+        # (finite and valid), its kind
         dprior = {}
         if depth is not None:
             for v in train_ids:
                 vals = torch.as_tensor(np.asarray(depth[v].values, dtype=np.float32))
                 ok = torch.as_tensor(np.asarray(depth[v].valid, dtype=bool)) & torch.isfinite(vals)
-                dprior[v] = (torch.nan_to_num(vals, nan=0.0, posinf=0.0, neginf=0.0).to(dev), ok.to(dev), depth[v].kind)
+                dprior[v] = (torch.nan_to_num(vals, nan=0.0, posinf=0.0, neginf=0.0), ok, depth[v].kind)
+            dprior = place(dprior, dev, data_on(config))
         has_any = {v: bool(targets.has_target[v].any()) for v in train_ids} if targets is not None else {}
         # the host copies of the priors are no longer needed: the targets, dprior and edges hold what training
         # reads (at 1440x1080 the masks and depth maps of 175 views are about 2.5 GB)
