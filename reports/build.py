@@ -22,6 +22,7 @@ from gsbench.reports.ablations import (depth_formulation_table, latent_diff_tabl
                                        method_diff_table, noise_table, ordering_table, other_study_tables)
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.claims import claims_table
+from gsbench.reports.controls import controls_table
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null
 from gsbench.reports.spec import STUDIES
 from gsbench.reports.studies import reconstruction_table, removal_table, semantic_table
@@ -239,6 +240,7 @@ def build_tables(res: Results) -> list[Table]:
     tables += noise_table(res)
     tables += other_study_tables(res)
     tables += claims_table(res)
+    tables += controls_table(res)
     tables += budget_table(res)
     return tables
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gsbench.reports.ablations import _covered, run_dropped
+from gsbench.reports.controls import blind_claims
 from gsbench.reports.data import Results, same
 
 from gsbench.reports.spec import (AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
@@ -230,6 +231,7 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
     claims = PAPER_CLAIMS if claims is None else claims
     if not any(res.run_ids(study=c.study) for c in claims):
         return []
+    blind = blind_claims(res)
     rows = []
     for c in claims:
         ids = res.run_ids(study=c.study)
@@ -241,6 +243,8 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
             continue
         for sc, pr in pairs:
             m = measure(res, c, sc, pr)
+            if c.key in blind and m.verdict not in (NOT_RUN, NOT_TESTABLE):
+                m.verdict = blind[c.key]
             rows.append(Row([c.text, c.source, f"{sc} ({PROTOCOL_SHORT.get(pr, pr)})"],
                             [Cell(text=paper), Cell(text=m.text), Cell(text=m.mde), Cell(text=m.verdict)]))
     cols = [Column("paper", "Paper", "Paper"), Column("measured", "gsbench [95 % CI] (n)", "gsbench [95\\% CI] (n)"),
@@ -253,7 +257,8 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
            "smaller than claimed (excludes zero, lies short of the paper's value), not reproduced (contains zero, "
            "lies short of the paper's value; the largest compatible effect is printed), opposite (excludes zero on "
            "the other side), inconclusive (contains zero and the paper's value, or one seed); without a number "
-           "only the side of zero counts; robustness claims use a "
+           "only the side of zero counts; blind = the claim's positive control ran and showed no marked effect "
+           "(table claims_controls); robustness claims use a "
            f"+-{ROBUST_MARGIN_DB} dB margin chosen by gsbench; not run = no runs.")
     return [Table("paper_claims", "Paper claims", cap, ["Claim", "Paper source", "Scene"], cols, rows,
                   section="claims")]

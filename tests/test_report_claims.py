@@ -258,3 +258,33 @@ def test_runs_without_config_are_not_merged(tmp_path: Path):
     df["config_key"] = "abc123"
     (t, _) = loss_subsets_table(Results(df))
     assert len(t.rows) == 1 and t.rows[0].labels[2].endswith("(merged: same resolved config)")
+
+
+def test_controls_mark_and_blind(tmp_path: Path):
+    """A marked control leaves its claims alone; an unmarked one makes them 'blind'."""
+    from gsbench.reports.controls import MARKED, UNMARKED, controls_table
+    for s in (0, 1, 2):
+        # few-view depth control: lambda 1 is 2 dB above lambda 0 on every seed (+-0.01): marked
+        for lam, psnr in ((0.0, 20.0), (1.0, 22.0)):
+            write_run(tmp_path, f"cd/{lam}_{s}", method="gaussiands", scene="bench", seed=s, study="control_depth",
+                      grid={"gaussiands.lambdas.depth": lam}, metrics={"psnr": psnr + SEED_NOISE[s] + 0.01 * s})
+        # L_ds control: +5, -5, +5 mBIoU points around the same mean: unmarked
+        for ds in (False, True):
+            mb = 0.6 + (0.05 * (-1) ** s if ds else 0.0)
+            write_run(tmp_path, f"cds/{int(ds)}_{s}", method="gaussiands", scene="bench", seed=s, study="control_ds",
+                      grid={"gaussiands.losses.ds": ds}, metrics={"mbiou_3dovs": mb, "miou_3dovs": 0.9})
+        # the loss-subset claims the L_ds control guards
+        for ds in (False, True):
+            write_run(tmp_path, f"ls/{int(ds)}_{s}", method="gaussiands", scene="bench", seed=s, study="loss_subsets",
+                      grid={"gaussiands.losses.depth": False, "gaussiands.losses.tv": False,
+                            "gaussiands.losses.ds": ds},
+                      metrics={"miou_3dovs": 0.5 + 0.01 * ds + 0.001 * s, "psnr": 20.0})
+    res = Results(collect(tmp_path))
+    t = controls_table(res)[0]
+    marks = {(r.labels[1], r.labels[3]): r.cells[1].plain() for r in t.rows}
+    assert marks[("control_depth (PSNR (dB))", "depth=1 vs depth=0")] == MARKED
+    assert marks[("control_depth (Depth AbsRel (%))", "depth=1 vs depth=0")] == "not run"  # no depth_absrel
+    assert marks[("control_ds (mBIoU (%))", "ds=True vs ds=False")] == UNMARKED
+    full = full_rows(res)
+    assert full["loss_ds_miou"][2] == "blind: control ds_mbiou unmarked"
+    assert full["loss_all_miou"][2] == NOT_RUN  # not guarded by a control, and its rows did not run
