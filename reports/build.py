@@ -15,8 +15,8 @@ import pandas as pd
 
 from gsbench.collect import collect, read_collected, write_collected
 from gsbench.errors import InputError
+from gsbench.reports import doseplots, plots, shares
 from gsbench.reports import html as html_mod
-from gsbench.reports import plots, shares
 
 from gsbench.reports.ablations import (depth_formulation_table, latent_diff_table, loss_subsets_table,  # isort: skip
                                        method_diff_table, noise_table, ordering_table, other_study_tables)
@@ -42,7 +42,7 @@ _SECTION_TITLES = {
     "claims": "Paper claims: reproduced or not",
     "budgets": "Training budget per method",
 }
-_NO_BARS = ("latent_dim", "lambda_pearson", "paper_claims", "budgets")
+_NO_BARS = ("latent_dim", "lambda_pearson", "paper_claims", "claims_controls", "budgets")
 
 
 @dataclass
@@ -186,6 +186,13 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         summary.plots.append(p)
         section("latent_dim").figures.append((p.relative_to(out_dir).as_posix(),
                                               "Latent-d trade-off: accuracy against cost; dashed = reference method."))
+
+    for p in doseplots.plot_doses(res, plot_dir / "dose"):
+        summary.plots.append(p)
+        section("claims").figures.append(
+            (p.relative_to(out_dir).as_posix(),
+             "Dose response: mean over seeds and its 95 % band against the swept value; dashed line / crosses = "
+             "the paper's setting or its reported values."))
 
     # what is absent
     absent = []

@@ -288,3 +288,19 @@ def test_controls_mark_and_blind(tmp_path: Path):
     full = full_rows(res)
     assert full["loss_ds_miou"][2] == "blind: control ds_mbiou unmarked"
     assert full["loss_all_miou"][2] == NOT_RUN  # not guarded by a control, and its rows did not run
+
+
+def test_dose_band_hand_computed_and_figure(tmp_path: Path):
+    from gsbench.reports.doseplots import DOSES, mean_band, plot_dose
+    # 1, 2, 3: mean 2, sd 1, half-width t_{0.975,2} / sqrt(3) = 4.303 / 1.7321 = 2.484
+    m, h = mean_band([1.0, 2.0, 3.0])
+    assert m == pytest.approx(2.0) and h == pytest.approx(2.484, rel=2e-4)
+    assert mean_band([5.0]) == (5.0, None)
+    for s in (0, 1):
+        for lam, psnr in ((0.0, 20.0), (0.1, 21.0), (1.0, 22.0)):
+            write_run(tmp_path / "runs", f"cd/{lam}_{s}", method="gaussiands", scene="bench", seed=s,
+                      study="control_depth", grid={"gaussiands.lambdas.depth": lam}, metrics={"psnr": psnr + s})
+    res = Results(collect(tmp_path / "runs"))
+    dose = next(d for d in DOSES if d.study == "control_depth" and d.metric == "psnr")
+    paths = plot_dose(res, dose, tmp_path / "dose")
+    assert len(paths) == 1 and paths[0].stat().st_size > 1000
