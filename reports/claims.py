@@ -243,7 +243,9 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
             continue
         for sc, pr in pairs:
             m = measure(res, c, sc, pr)
-            if c.key in blind and m.verdict not in (NOT_RUN, NOT_TESTABLE):
+            # blind replaces only the verdicts that read an absence of effect: an interval that excludes
+            # zero shows the mechanism whatever the control says
+            if c.key in blind and m.verdict.split(":")[0] in (NOT_REPRODUCED, INCONCLUSIVE):
                 m.verdict = blind[c.key]
             rows.append(Row([c.text, c.source, f"{sc} ({PROTOCOL_SHORT.get(pr, pr)})"],
                             [Cell(text=paper), Cell(text=m.text), Cell(text=m.mde), Cell(text=m.verdict)]))
@@ -257,8 +259,8 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
            "smaller than claimed (excludes zero, lies short of the paper's value), not reproduced (contains zero, "
            "lies short of the paper's value; the largest compatible effect is printed), opposite (excludes zero on "
            "the other side), inconclusive (contains zero and the paper's value, or one seed); without a number "
-           "only the side of zero counts; blind = the claim's positive control ran and showed no marked effect "
-           "(table claims_controls); robustness claims use a "
+           "only the side of zero counts; blind = not reproduced or inconclusive while the claim's positive control "
+           "ran and showed no marked effect (table claims_controls); robustness claims use a "
            f"+-{ROBUST_MARGIN_DB} dB margin chosen by gsbench; not run = no runs.")
     return [Table("paper_claims", "Paper claims", cap, ["Claim", "Paper source", "Scene"], cols, rows,
                   section="claims")]

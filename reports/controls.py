@@ -1,8 +1,9 @@
 """Positive controls of the paper-claims table: for each mechanism a setting where its effect must
 exist if the implementation is right (the control grids, docs/grids.md). A control is *marked* when
-at least one of its rows has a 95 % interval that excludes zero on the expected side; a claim whose
-control ran and is not marked is "blind" in the claims table: the study could not have seen the
-mechanism, so its interval says nothing about the paper's effect.
+at least one of its rows has a 95 % interval that excludes zero on the expected side. A claim whose
+control ran and is not marked, and whose own interval shows no effect (not reproduced, inconclusive),
+is "blind" in the claims table: the study could not have seen the mechanism, so its interval says
+nothing about the paper's effect.
 """
 from __future__ import annotations
 

@@ -278,7 +278,7 @@ def test_controls_mark_and_blind(tmp_path: Path):
             write_run(tmp_path, f"ls/{int(ds)}_{s}", method="gaussiands", scene="bench", seed=s, study="loss_subsets",
                       grid={"gaussiands.losses.depth": False, "gaussiands.losses.tv": False,
                             "gaussiands.losses.ds": ds},
-                      metrics={"miou_3dovs": 0.5 + 0.01 * ds + 0.001 * s, "psnr": 20.0})
+                      metrics={"miou_3dovs": 0.5 + (0.01 * (-1) ** s if ds else 0.0), "psnr": 20.0})
     res = Results(collect(tmp_path))
     t = controls_table(res)[0]
     marks = {(r.labels[1], r.labels[3]): r.cells[1].plain() for r in t.rows}
@@ -286,8 +286,25 @@ def test_controls_mark_and_blind(tmp_path: Path):
     assert marks[("control_depth (Depth AbsRel (%))", "depth=1 vs depth=0")] == "not run"  # no depth_absrel
     assert marks[("control_ds (mBIoU (%))", "ds=True vs ds=False")] == UNMARKED
     full = full_rows(res)
+    # +1, -1, +1 points: the interval contains zero and lies short of +37.30 (not reproduced), but the
+    # L_ds control is unmarked, so the row reads blind
     assert full["loss_ds_miou"][2] == "blind: control ds_mbiou unmarked"
     assert full["loss_all_miou"][2] == NOT_RUN  # not guarded by a control, and its rows did not run
+
+
+def test_blind_never_hides_an_effect(tmp_path: Path):
+    """A claim whose interval excludes zero keeps its verdict even when its control is unmarked."""
+    for s in (0, 1, 2):
+        for ds in (False, True):
+            write_run(tmp_path, f"cds/{int(ds)}_{s}", method="gaussiands", scene="bench", seed=s, study="control_ds",
+                      grid={"gaussiands.losses.ds": ds}, metrics={"mbiou_3dovs": 0.6})
+            write_run(tmp_path, f"ls/{int(ds)}_{s}", method="gaussiands", scene="bench", seed=s, study="loss_subsets",
+                      grid={"gaussiands.losses.depth": False, "gaussiands.losses.tv": False,
+                            "gaussiands.losses.ds": ds},
+                      metrics={"miou_3dovs": 0.5 + 0.01 * ds + 0.001 * s * ds, "psnr": 20.0})
+    full = full_rows(Results(collect(tmp_path)))
+    # +1.0, +1.1, +1.2 points: excludes zero, far short of +37.30
+    assert full["loss_ds_miou"][2].startswith("smaller than claimed: at most +1.")
 
 
 def test_dose_band_hand_computed_and_figure(tmp_path: Path):
