@@ -50,6 +50,9 @@ PRESETS: dict[str, dict] = {
 # studies on the CPU (the cpu-medium preset): the tabletop at 256x192, where the smallest objects are about
 # 30 px across, so segmentation metrics are not capped by the resolution
 PRESETS["tabletop-medium"] = dict(PRESETS["tabletop-small"], resolution=(256, 192))
+# the latent-d control: every object of the pool in the room (10 objects + floor, wall and two decals =
+# 14 classes, so 14 queries), at the CPU study scale
+PRESETS["room-many"] = dict(PRESETS["room-medium"], objects=(10, 10), views=24, resolution=(256, 192))
 
 # class name, shape, colour 1, colour 2, pattern
 OBJECT_POOL = [
@@ -138,7 +141,7 @@ def compose(
     rng = np.random.default_rng(seed)
     lo, hi = cfg["objects"]
     n_obj = int(rng.integers(lo, hi + 1))
-    n_obj = max(3, min(8, n_obj))
+    n_obj = max(3, min(len(OBJECT_POOL), n_obj))
     # distinct classes, at least one of each shape
     by_shape = {s: [k for k, o in enumerate(OBJECT_POOL) if o[1] == s] for s in ("sphere", "box", "cylinder")}
     chosen = [int(rng.choice(v)) for v in by_shape.values()]

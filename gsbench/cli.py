@@ -24,6 +24,7 @@ COMMANDS = {
     "train": ("train", "train a registered method on a scene into a run folder"),
     "eval": ("eval", "evaluate a trained run, or score a folder of predicted masks against a layout"),
     "ablate": ("ablate", "run an ablation / noise grid (local process pool or submitit)"),
+    "claims": ("claims", "run every grid the paper-claims table needs, then print the table and write the report"),
     "collect": ("collect", "gather every results.json under a folder into one table"),
     "report": ("report", "write tables, plots and a static HTML report from collected results"),
     "stress": ("stress", "run the numerical stress battery against float64 references"),

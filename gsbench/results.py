@@ -34,6 +34,7 @@ IMAGE_METRICS = ("psnr", "ssim", "lpips", "fps", "ssim_valid", "lpips_package")
 SEG_BASES = {"3dovs": ("miou", "mbiou", "pixel_acc", "pixel_acc_labelled"), "lerf": ("miou", "loc_acc")}
 MASK_FOLDER_METRICS = ("mbiou_lerf",)
 REMOVAL_METRICS = ("removal_residual", "removal_psnr_outside")
+DEPTH_METRICS = ("depth_absrel",)
 ORDERING_METRICS = ("ordering_adjacent_distance", "ordering_adjacent_mask_iou", "ordering_adjacent_mask_iou_strict",
                     "ordering_adjacent_mask_iou_flow")
 TIMING_NAMES = ("train_s", "eval_s", "render_ms")
@@ -56,7 +57,7 @@ def _seg_names() -> tuple[str, ...]:
 
 #: every name `metrics` may hold, in report order
 METRIC_NAMES: tuple[str, ...] = (IMAGE_METRICS + _seg_names() + MASK_FOLDER_METRICS + REMOVAL_METRICS
-                                 + ORDERING_METRICS)
+                                 + ORDERING_METRICS + DEPTH_METRICS)
 #: every quantity a collected row may carry (metrics, timings, memory)
 KNOWN_METRICS: frozenset[str] = frozenset(METRIC_NAMES + TIMING_NAMES + MEMORY_NAMES)
 
@@ -103,7 +104,8 @@ def run_results(*, identity: dict, metrics: dict, metric_impl: dict, skipped: di
 
 
 def failed_results(*, identity: dict, reason: str, machine: dict, timings: Optional[dict] = None,
-                   metrics: Iterable[str] = IMAGE_METRICS + REMOVAL_METRICS + ORDERING_METRICS) -> dict:
+                   metrics: Iterable[str] = IMAGE_METRICS + REMOVAL_METRICS + ORDERING_METRICS + DEPTH_METRICS
+                   ) -> dict:
     """results.json of a cell whose training or evaluation failed: the given metrics null, each with
     `reason` under its own name in skipped, status "failed"."""
     names = list(metrics)

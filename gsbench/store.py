@@ -20,6 +20,8 @@ Study names and the grid axis keys they vary (grids in gsbench/grids/, tables in
   latent_dim         gaussiands.latent_dim (plus a method=vanilla reference cell)
   lambda_grid        gaussiands.lambdas.depth / .tv / .sem / .ds
   depth_noise        priors.depth.noise.type, priors.depth.noise.severity
+  control_*          the positive controls of the claims table (docs/grids.md): control_depth,
+                     control_depth_noise, control_ds, control_latent, control_sem
 """
 from __future__ import annotations
 

@@ -12,6 +12,11 @@ All image tensors are (H, W, C) or (H, W). Every division, sqrt and normalisatio
   (1 / max(D, DEPTH_EPS)); `depth`/`metric` with D.
 - `normalised_depth`: D divided by its detached alpha-weighted mean, so L_depth and L_tv are scale-free
   and the paper's lambdas weigh them the same on every scene (GaussianDS feeds this to both terms).
+- `expected_depth`: D / alpha, the depth of the covered part of a pixel (a convex combination of the
+  Gaussians' z, so it never blows up); L_depth compares the prior with it, not with D itself: 1 / D
+  of a half-covered pixel reads as twice as near, so a disparity loss on D confounds coverage with
+  depth and, once opacities are low (after an opacity reset), drives the opacities instead of the
+  geometry (docs/training.md).
 - `tv_loss`: isotropic TV sqrt(dx^2 + dy^2 + eps) averaged over pixels (the paper writes a sum; with
   lambda_tv = 1.5 a sum over pixels would dwarf every other term).
 - `sem_loss`: mean |S_hat - S| over the pixels that have a target (and over the d channels).
@@ -32,6 +37,7 @@ import torch.nn.functional as F
 
 DEPTH_FORMULATIONS = ("none", "raw_l1", "minmax", "scale_shift", "pearson")
 DEPTH_EPS = 1e-6          # rendered depth below this is "no surface" (not inverted, not used)
+ALPHA_EPS = 1e-3          # accumulated alpha below this is "not covered" (1 - T in float32 is exact to ~1e-7)
 CONSTANT_REL_EPS = 1e-9   # prior whose std is below this fraction of its magnitude is "constant"
 SSIM_C1 = 0.01 ** 2
 SSIM_C2 = 0.03 ** 2
@@ -193,6 +199,13 @@ def normalised_depth(depth: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
     and L_tv mean the same on a scene and on the same scene scaled by any factor."""
     ref = depth.detach().sum() / alpha.detach().sum().clamp_min(1e-6)
     return depth / ref.clamp_min(DEPTH_EPS)
+
+
+def expected_depth(depth: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
+    """D / alpha where alpha > ALPHA_EPS, 0 (unusable for the depth loss) elsewhere: the depth of the
+    covered part of each pixel, invariant to the opacities when one surface covers it."""
+    covered = alpha > ALPHA_EPS
+    return torch.where(covered, depth / alpha.clamp_min(ALPHA_EPS), torch.zeros_like(depth))
 
 
 def _masked_mean(x: torch.Tensor, w: torch.Tensor, n: torch.Tensor) -> torch.Tensor:

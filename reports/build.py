@@ -15,14 +15,15 @@ import pandas as pd
 
 from gsbench.collect import collect, read_collected, write_collected
 from gsbench.errors import InputError
+from gsbench.reports import doseplots, plots, shares
 from gsbench.reports import html as html_mod
 from gsbench.reports import pictures as pictures_mod
-from gsbench.reports import plots, shares
 
 from gsbench.reports.ablations import (depth_formulation_table, latent_diff_table, loss_subsets_table,  # isort: skip
                                        method_diff_table, noise_table, ordering_table, other_study_tables)
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.claims import claims_table
+from gsbench.reports.controls import controls_table
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null
 from gsbench.reports.spec import STUDIES
 from gsbench.reports.studies import reconstruction_table, removal_table, semantic_table
@@ -43,7 +44,7 @@ _SECTION_TITLES = {
     "budgets": "Training budget per method",
     "pictures": "Pictures: renders, depth and masks per scene and method",
 }
-_NO_BARS = ("latent_dim", "lambda_pearson", "paper_claims", "budgets")
+_NO_BARS = ("latent_dim", "lambda_pearson", "paper_claims", "claims_controls", "budgets")
 
 
 @dataclass
@@ -194,6 +195,13 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         section("latent_dim").figures.append((p.relative_to(out_dir).as_posix(),
                                               "Latent-d trade-off: accuracy against cost; dashed = reference method."))
 
+    for p in doseplots.plot_doses(res, plot_dir / "dose"):
+        summary.plots.append(p)
+        section("claims").figures.append(
+            (p.relative_to(out_dir).as_posix(),
+             "Dose response: mean over seeds and its 95 % band against the swept value; dashed line / crosses = "
+             "the paper's setting or its reported values."))
+
     # what is absent
     absent = []
     if not main_ids:
@@ -251,6 +259,7 @@ def build_tables(res: Results) -> list[Table]:
     tables += noise_table(res)
     tables += other_study_tables(res)
     tables += claims_table(res)
+    tables += controls_table(res)
     tables += budget_table(res)
     return tables
 

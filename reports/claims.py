@@ -1,11 +1,17 @@
 """The "paper claims" table: each claim of the paper's ablation section, the paper's number, gsbench's
-measured effect with its 95 % interval, and a verdict that follows only from that interval.
+measured effect with its 95 % interval, the minimum detectable effect (MDE) at its n, and a verdict
+that follows only from that interval.
 
 Why a data table: the paper's numbers live in one place (PAPER_CLAIMS, each with the section and
-table or figure it comes from), and the verdict rules are the same for every row:
-- directional claim (the paper says the effect is positive / negative): reproduced when the interval
-  excludes zero on the paper's side, opposite when it excludes zero on the other side, inconclusive
-  when it includes zero or has no interval (one seed);
+table or figure it comes from), and the verdict rules are the same for every row. Interval and
+paper number are in the same display units (PSNR in dB, IoU in %, r as is):
+- claim with a number P (sized against the paper; "above"/"below" read on the paper's side of zero):
+  reproduced when the interval excludes zero on P's side and reaches P; smaller than claimed when it
+  excludes zero on P's side but lies wholly short of P; not reproduced when it contains zero and lies
+  wholly short of P (the row prints the largest effect still compatible); opposite when it excludes
+  zero on the other side; inconclusive when it contains both zero and P (or has no interval);
+- directional claim without a number: reproduced / opposite when the interval excludes zero on the
+  paper's / the other side, inconclusive when it includes zero or has no interval (one seed);
 - robustness claim (the paper says "no real change"): reproduced when the interval lies inside
   +-margin, opposite when it lies wholly beyond the margin on the harmful side, else inconclusive.
   The margin is gsbench's own, fixed here before any run, not a number of the paper;
@@ -18,17 +24,19 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gsbench.reports.ablations import _covered, run_dropped
+from gsbench.reports.controls import blind_claims
 from gsbench.reports.data import Results, same
 
 from gsbench.reports.spec import (AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
                                   AX_ORDERING, metric_spec)
-from gsbench.reports.stats import Diff, compare, pearson, pearson_interval
+from gsbench.reports.stats import Diff, compare, mde_r, pearson, pearson_interval
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
 from gsbench.reports.sweeps import lambda_points
 from gsbench.reports.table import Cell, Column, Row, Table
 
 REPRODUCED, OPPOSITE, INCONCLUSIVE, NOT_RUN, NOT_TESTABLE = (
     "reproduced", "opposite", "inconclusive", "not run", "not testable")
+SMALLER, NOT_REPRODUCED = "smaller than claimed", "not reproduced"
 ROBUST_MARGIN_DB = 0.5  # gsbench's equivalence margin for "PSNR is robust" (dB), not the paper's
 MAX = "max"             # selector value: the highest value of that axis among the study's runs
 
@@ -110,8 +118,10 @@ PAPER_CLAIMS: list[Claim] = [
 ]
 
 
-def verdict(direction: int, lo: float | None, hi: float | None, margin: float = ROBUST_MARGIN_DB) -> str:
-    """The verdict of one claim from the interval [lo, hi] of (row - reference), or of r."""
+def verdict(direction: int, lo: float | None, hi: float | None, paper: float | None = None,
+            margin: float = ROBUST_MARGIN_DB) -> str:
+    """The verdict of one claim from the interval [lo, hi] of (row - reference), or of r; with the
+    paper's number `paper` the verdict is sized against it (module docstring)."""
     if lo is None or hi is None:
         return INCONCLUSIVE
     if direction == 0:  # robustness: harmful side is negative (a drop)
@@ -120,9 +130,28 @@ def verdict(direction: int, lo: float | None, hi: float | None, margin: float = 
         if hi < -margin:
             return OPPOSITE
         return INCONCLUSIVE
-    if lo > 0.0 or hi < 0.0:
-        return REPRODUCED if (lo > 0.0) == (direction > 0) else OPPOSITE
-    return INCONCLUSIVE
+    if paper is not None and (paper > 0.0) != (direction > 0):
+        raise ValueError(f"claim direction {direction:+d} disagrees with the sign of the paper's number {paper}")
+    # on the paper's side: a = the near end, b = the far end of the interval, p = |paper|
+    a, b = (lo, hi) if direction > 0 else (-hi, -lo)
+    if b < 0.0:
+        return OPPOSITE
+    if paper is None:
+        return REPRODUCED if a > 0.0 else INCONCLUSIVE
+    short = b < abs(paper)  # the whole interval lies short of the paper's value
+    if a > 0.0:
+        return SMALLER if short else REPRODUCED
+    return NOT_REPRODUCED if short else INCONCLUSIVE
+
+
+def verdict_text(v: str, direction: int, lo: float | None, hi: float | None, paper: float | None,
+                 decimals: int) -> str:
+    """The verdict with, when the interval lies short of the paper's number, the largest effect on the
+    paper's side it still allows ("at most +0.14, paper +37.30")."""
+    if v not in (SMALLER, NOT_REPRODUCED) or lo is None or hi is None or paper is None:
+        return v
+    bound = f"at most {hi:+.{decimals}f}" if direction > 0 else f"at least {lo:+.{decimals}f}"
+    return f"{v}: {bound}, paper {paper:+.{decimals}f}"
 
 
 def _select(res: Results, ids: list[str], sel: dict) -> list[str]:
@@ -149,34 +178,51 @@ def _dropped_reason(res: Results, rids: list[str], axes: list[str]) -> str | Non
     return None
 
 
-def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> tuple[str, str]:
-    """(measured text, verdict) of one claim on one scene."""
+@dataclass
+class Measured:
+    """One row's measurement: the effect text, the verdict (with its bound), the MDE text."""
+    text: str
+    verdict: str
+    mde: str = "–"
+
+
+def _mde_text(mde: float | None, decimals: int, why: str) -> str:
+    return f"{mde:.{decimals}f}" if mde is not None else f"n/a ({why})"
+
+
+def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> Measured:
+    """Measured effect, verdict and MDE of one claim on one scene."""
     sp = metric_spec(claim.metric)
     concrete = res.resolve(claim.metric, protocol)
     if concrete is None:
-        return "n/a (metric not defined for this protocol)", NOT_RUN
+        return Measured("n/a (metric not defined for this protocol)", NOT_RUN)
     if claim.correlation:
         xs, ys = lambda_points(res, scene, protocol, claim.correlation, claim.metric)
+        mde = _mde_text(mde_r(len(xs)), 2, f"{len(xs)} runs, need 4")
         r, why = pearson(xs, ys)
         if r is None:
-            return f"n/a ({why})", NOT_RUN if len(xs) < 3 else INCONCLUSIVE
+            return Measured(f"n/a ({why})", NOT_RUN if len(xs) < 3 else INCONCLUSIVE, mde)
         ci = pearson_interval(r, len(xs))
         if ci is None:
-            return f"r = {r:+.2f} [n/a: {len(xs)} runs, need 4] (n={len(xs)})", INCONCLUSIVE
-        v = verdict(claim.direction, *ci)
+            return Measured(f"r = {r:+.2f} [n/a: {len(xs)} runs, need 4] (n={len(xs)})", INCONCLUSIVE, mde)
+        v = verdict(claim.direction, *ci, paper=claim.paper)
         mark = " *" if (ci[0] > 0 or ci[1] < 0) else ""
-        return f"r = {r:+.2f} [{ci[0]:+.2f}, {ci[1]:+.2f}]{mark} (n={len(xs)})", v
+        return Measured(f"r = {r:+.2f} [{ci[0]:+.2f}, {ci[1]:+.2f}]{mark} (n={len(xs)})",
+                        verdict_text(v, claim.direction, *ci, claim.paper, 2), mde)
     ids = res.run_ids(study=claim.study, scene=scene, protocol=protocol)
     a, b = _select(res, ids, claim.row), _select(res, ids, claim.reference)
     va, vb = res.seed_values(a, concrete, sp.scale), res.seed_values(b, concrete, sp.scale)
     if not va or not vb:
-        return "n/a (" + ("compared row" if not va else "reference row") + " not run or not evaluated)", NOT_RUN
+        return Measured("n/a (" + ("compared row" if not va else "reference row") + " not run or not evaluated)",
+                        NOT_RUN)
     why = _dropped_reason(res, a + b, list(claim.row) + list(claim.reference))
     d: Diff = compare(va, vb)
     text = d.text(sp.decimals)
+    mde = _mde_text(d.mde, sp.decimals, d.reason or "no spread")
     if why:
-        return text + f"; setting dropped: {why}", NOT_TESTABLE
-    return text, verdict(claim.direction, d.lo, d.hi)
+        return Measured(text + f"; setting dropped: {why}", NOT_TESTABLE, mde)
+    v = verdict(claim.direction, d.lo, d.hi, paper=claim.paper)
+    return Measured(text, verdict_text(v, claim.direction, d.lo, d.hi, claim.paper, sp.decimals), mde)
 
 
 def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]:
@@ -185,26 +231,36 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
     claims = PAPER_CLAIMS if claims is None else claims
     if not any(res.run_ids(study=c.study) for c in claims):
         return []
+    blind = blind_claims(res)
     rows = []
     for c in claims:
         ids = res.run_ids(study=c.study)
         pairs = scene_protocols(res, ids) if ids else []
         paper = (f"{c.paper:+.2f}" if c.paper is not None else "–") + (f" ({c.paper_note})" if c.paper_note else "")
         if not pairs:
-            rows.append(
-                Row([c.text, c.source, "–"], [Cell(text=paper), Cell(text="study not run"), Cell(text=NOT_RUN)])
-            )
+            rows.append(Row([c.text, c.source, "–"], [Cell(text=paper), Cell(text="study not run"), Cell(text="–"),
+                                                      Cell(text=NOT_RUN)]))
             continue
         for sc, pr in pairs:
-            text, v = measure(res, c, sc, pr)
+            m = measure(res, c, sc, pr)
+            # blind replaces only the verdicts that read an absence of effect: an interval that excludes
+            # zero shows the mechanism whatever the control says
+            if c.key in blind and m.verdict.split(":")[0] in (NOT_REPRODUCED, INCONCLUSIVE):
+                m.verdict = blind[c.key]
             rows.append(Row([c.text, c.source, f"{sc} ({PROTOCOL_SHORT.get(pr, pr)})"],
-                            [Cell(text=paper), Cell(text=text), Cell(text=v)]))
+                            [Cell(text=paper), Cell(text=m.text), Cell(text=m.mde), Cell(text=m.verdict)]))
     cols = [Column("paper", "Paper", "Paper"), Column("measured", "gsbench [95 % CI] (n)", "gsbench [95\\% CI] (n)"),
-            Column("verdict", "Verdict", "Verdict")]
+            Column("mde", "MDE", "MDE"), Column("verdict", "Verdict", "Verdict")]
     cap = ("Claims of the paper's ablation section against gsbench's measurements: effect = compared row minus "
            "reference row (display units; PSNR in dB, IoU in %), or Pearson r for the lambda claims, with its 95 % "
-           "interval (t interval paired by seed, else Welch; Fisher z for r). Verdict: reproduced / opposite when the "
-           "interval excludes zero on the paper's / the other side, inconclusive when it includes zero or there is "
-           f"one seed; robustness claims use a +-{ROBUST_MARGIN_DB} dB margin chosen by gsbench; not run = no runs.")
+           "interval (t interval paired by seed, else Welch; Fisher z for r). MDE = the smallest true effect this "
+           "design detects (two-sided 5 %, 80 % power) from the observed spread at its n. Verdict, for a claim "
+           "with a number: reproduced (interval excludes zero on the paper's side and reaches the paper's value), "
+           "smaller than claimed (excludes zero, lies short of the paper's value), not reproduced (contains zero, "
+           "lies short of the paper's value; the largest compatible effect is printed), opposite (excludes zero on "
+           "the other side), inconclusive (contains zero and the paper's value, or one seed); without a number "
+           "only the side of zero counts; blind = not reproduced or inconclusive while the claim's positive control "
+           "ran and showed no marked effect (table claims_controls); robustness claims use a "
+           f"+-{ROBUST_MARGIN_DB} dB margin chosen by gsbench; not run = no runs.")
     return [Table("paper_claims", "Paper claims", cap, ["Claim", "Paper source", "Scene"], cols, rows,
                   section="claims")]

@@ -42,6 +42,7 @@ METRICS: dict[str, MetricSpec] = {
     "miou_lerf_decode": _pct("mIoU decode"),
     "removal_residual": MetricSpec("Residual object px (%)", "Residual object px (\\%)", "lower", 100.0, 2),
     "removal_psnr_outside": MetricSpec("PSNR outside (dB)", "PSNR outside (dB)", "higher", 1.0, 2),
+    "depth_absrel": MetricSpec("Depth AbsRel (%)", "Depth AbsRel (\\%)", "lower", 100.0, 2),
     "ordering_adjacent_distance": MetricSpec("Adjacent pose distance", "Adjacent Pose Distance", "lower", 1.0, 3),
     "ordering_adjacent_mask_iou": _pct("Adjacent mask IoU (shared ids)"),
     "ordering_adjacent_mask_iou_strict": _pct("Adjacent mask IoU (strict)"),

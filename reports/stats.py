@@ -5,6 +5,14 @@ Why here: the seed intervals and the paper-claims verdicts must use the same rul
 the same seeds are paired by seed (same seed = same initialisation and priors, so the paired
 difference removes that shared noise); otherwise Welch's unequal-variance t interval is used.
 With fewer than two values on a side there is no interval (shown as n/a, never as zero width).
+
+The minimum detectable effect (MDE) says what a study could have found: the smallest true difference
+a two-sided 5 % test on this design detects with 80 % power, from the observed spread. Paired by seed:
+MDE = (t_{0.975,n-1} + t_{0.80,n-1}) * sd_diff / sqrt(n), the textbook normal-shift approximation with
+t quantiles (the exact non-central t answer is a little larger at very small n). Welch: the same sum of
+quantiles at the Welch-Satterthwaite degrees of freedom times sqrt(sd_a^2/n_a + sd_b^2/n_b). With fewer
+than two values on a side there is no spread to size it from, so no MDE (n/a), never zero.
+For a Pearson r: the smallest |r| detected at n runs, tanh((z_{0.975} + z_{0.80}) / sqrt(n - 3)).
 """
 from __future__ import annotations
 
@@ -15,6 +23,7 @@ import numpy as np
 from scipy import stats as sps
 
 LEVEL = 0.95
+POWER = 0.80
 
 
 @dataclass
@@ -27,6 +36,7 @@ class Diff:
     n_b: int = 0
     method: str = ""          # "paired" | "welch" | ""
     reason: str | None = None  # why there is no interval (or no difference)
+    mde: float | None = None   # minimum detectable effect at this n (module docstring), None = no spread
 
     @property
     def has_interval(self) -> bool:
@@ -65,6 +75,24 @@ def t_quantile(df: float) -> float:
     return float(sps.t.ppf(0.5 + LEVEL / 2.0, df))
 
 
+def power_quantile(df: float) -> float:
+    """One-sided quantile of Student's t at the power (80 %) with df degrees of freedom."""
+    return float(sps.t.ppf(POWER, df))
+
+
+def mde_t(se: float, df: float) -> float:
+    """Minimum detectable effect of a t test with standard error se and df degrees of freedom."""
+    return (t_quantile(df) + power_quantile(df)) * se
+
+
+def mde_r(n: int) -> float | None:
+    """Smallest |Pearson r| a two-sided 5 % test detects with 80 % power at n points (needs n > 3)."""
+    if n <= 3:
+        return None
+    z = float(sps.norm.ppf(0.5 + LEVEL / 2.0)) + float(sps.norm.ppf(POWER))
+    return math.tanh(z / math.sqrt(n - 3))
+
+
 def _mean_sd(x: np.ndarray) -> tuple[float, float]:
     """Mean and sample std (ddof=1) computed on x / max|x|, so values near the float64 limit do not
     overflow in the sum or the squares."""
@@ -93,28 +121,30 @@ def compare(a: dict, b: dict) -> Diff:
         md, sd = _mean_sd(d)
         delta = 2.0 * md
         if d.size < 2:
-            half = None
+            half = mde = None
         else:
-            half = 2.0 * t_quantile(d.size - 1) * sd / math.sqrt(d.size)
+            se = 2.0 * sd / math.sqrt(d.size)
+            half, mde = t_quantile(d.size - 1) * se, mde_t(se, d.size - 1)
     else:
         out.method = "welch"
         delta = ma - mb
         if xa.size < 2 or xb.size < 2:
-            half = None
+            half = mde = None
         else:
             ea, eb = sa / math.sqrt(xa.size), sb / math.sqrt(xb.size)  # standard errors
             se = math.hypot(ea, eb)
             if se == 0.0:  # no spread on either side: the difference is exact
-                half = 0.0
+                half = mde = 0.0
             else:
                 # Welch-Satterthwaite degrees of freedom, on shares of se (no squares of large values)
                 pa, pb = ea / se, eb / se
                 dof = 1.0 / (pa ** 4 / (xa.size - 1) + pb ** 4 / (xb.size - 1))
-                half = t_quantile(dof) * se
+                half, mde = t_quantile(dof) * se, mde_t(se, dof)
     if not math.isfinite(delta) or (half is not None and not math.isfinite(half)):
         out.reason = "difference overflows float64"
         return out
     out.delta = delta
+    out.mde = mde if mde is not None and math.isfinite(mde) else None
     if half is None:
         out.reason = "one seed"
         return out

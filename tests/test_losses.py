@@ -208,3 +208,27 @@ def test_depth_edges_step_and_affine_invariance():
     ed = depth_edges(v, valid, 50, 150, dilate=1)
     assert ed.sum() > e.sum() and (ed | e).sum() == ed.sum()
     assert not depth_edges(np.full((10, 10), 3.0), np.ones((10, 10), bool)).any()
+
+
+def test_expected_depth_is_the_depth_of_the_covered_part():
+    from gsbench.methods.losses import expected_depth
+    D = torch.tensor([[2.0, 1.0, 0.0, 3.0]])
+    alpha = torch.tensor([[1.0, 0.5, 0.0, 1e-4]])
+    # 2 / 1 = 2, 1 / 0.5 = 2, uncovered pixels are 0 (the depth loss does not use them)
+    assert torch.equal(expected_depth(D, alpha), torch.tensor([[2.0, 2.0, 0.0, 0.0]]))
+
+
+def test_depth_loss_does_not_read_coverage_as_depth():
+    """Two surfaces at z = 1 and z = 2 with an exact disparity prior; half the far pixels are only
+    half covered (composited D = 0.5 * 2 = 1). On D the loss sees them as near surface; on D / alpha
+    it is zero."""
+    from gsbench.methods.losses import expected_depth
+    z = torch.tensor([[1.0, 1.0, 2.0, 2.0], [1.0, 1.0, 2.0, 2.0]])
+    alpha = torch.tensor([[1.0, 1.0, 1.0, 0.5], [1.0, 1.0, 1.0, 0.5]])
+    D = z * alpha
+    prior = 3.0 / z + 0.25          # disparity up to scale and shift
+    valid = torch.ones_like(z, dtype=torch.bool)
+    on_d = depth_loss("scale_shift", D, prior, valid, "disparity", min_valid=2)
+    on_e = depth_loss("scale_shift", expected_depth(D, alpha), prior, valid, "disparity", min_valid=2)
+    assert float(on_e.loss) == pytest.approx(0.0, abs=1e-6)
+    assert float(on_d.loss) > 0.1

@@ -7,10 +7,36 @@ import math
 import numpy as np
 import pytest
 
-from gsbench.reports.stats import compare, pearson, pearson_interval
+from gsbench.reports.stats import compare, mde_r, pearson, pearson_interval
 
 # two-sided 95 % quantiles of Student's t from a printed table
 T_TABLE = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776}
+# one-sided 80 % quantiles (t_{0.20} column of the same table)
+T80_TABLE = {2: 1.061, 3: 0.978, 4: 0.941}
+
+
+def test_mde_paired_hand_computed():
+    # differences 1, 2, 3: sd_diff = 1, n = 3, df = 2: (4.303 + 1.061) * 1 / sqrt(3) = 5.364 / 1.7321 = 3.0969
+    d = compare({0: 11.0, 1: 12.0, 2: 13.0}, {0: 10.0, 1: 10.0, 2: 10.0})
+    assert d.method == "paired"
+    assert d.mde == pytest.approx(3.0969, rel=2e-4)
+    assert d.mde == pytest.approx((T_TABLE[2] + T80_TABLE[2]) / math.sqrt(3), rel=2e-4)
+
+
+def test_mde_welch_hand_computed():
+    # sd 1 on both sides, n = 3 each, unpaired: se = sqrt(1/3 + 1/3) = 0.8165, Welch df = 4:
+    # (2.776 + 0.941) * 0.8165 = 3.0349
+    d = compare({0: 1.0, 1: 2.0, 2: 3.0}, {3: 3.0, 4: 4.0, 5: 5.0})
+    assert d.method == "welch" and d.mde == pytest.approx(3.0349, rel=2e-4)
+
+
+def test_mde_needs_two_values_and_pearson_mde():
+    assert compare({0: 1.0}, {0: 0.5}).mde is None  # one seed: no spread, no MDE (never zero)
+    assert compare({0: 1.0, 1: 2.0}, {5: 1.0}).mde is None
+    assert compare({0: 2.0, 1: 3.0}, {0: 1.0, 1: 2.0}).mde == 0.0  # identical differences: exact, MDE 0
+    # r at n = 12: tanh((1.960 + 0.8416) / sqrt(9)) = tanh(0.93387) = 0.7324
+    assert mde_r(12) == pytest.approx(0.7324, abs=2e-4)
+    assert mde_r(3) is None
 
 
 def test_paired_interval_matches_hand_computation():

@@ -13,6 +13,7 @@ from gsbench.results import ORDERING_METRICS, SEG_BASES, run_results, seg_metric
 from gsbench.store import read_json, write_json_atomic
 
 from .block import Block
+from .depth import depth_metrics
 from .frames import frame_sets, train_camera, view_name
 from .image import fps, image_metrics
 from .previews import save_previews
@@ -104,6 +105,7 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
         out.merge(fps(method, time_cams, config))
         out.merge(segmentation(method, scene, protocols, sets, config))
         out.merge(removal(method, scene, fs.reconstruction, rec_cams, config))
+        out.merge(depth_metrics(method, scene, fs.reconstruction, rec_cams))
     out.merge(_ordering(run_dir))
     for p, why in pskip.items():
         out.skip([seg_metric(b, p) for b in SEG_BASES[p]], why)

@@ -32,7 +32,8 @@ of "no run"); it stays failed on a re-run and `--retry-failed` runs it again.
 Modules, one job each: spec (grid files -> Grid, cells), planning (scenes, cell configs, run ids,
 manifest), liveness (cell_status.json, pid and heartbeat checks), running (a cell, a grid),
 priors_share (priors shared by several cells), failed (results.json of a failed cell), status
-(the status table), executors (local pool, serial, submitit).
+(the status table), executors (local pool, serial, submitit), claims (the grids `gsbench claims`
+runs, and their --quick variant).
 """
 from gsbench.grids.failed import write_failed_results
 

@@ -20,7 +20,7 @@ import torch
 from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import fit_priors, run_trainer, uses
 
-from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, normalised_depth,  # isort: skip
+from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, expected_depth, normalised_depth,  # isort: skip
                                     reconstruction_loss, sem_loss, tv_loss)
 from gsbench.methods.residency import data_on, place
 from gsbench.methods.semantic import build_targets, fit_autoencoder
@@ -107,7 +107,9 @@ class GaussianDS(Method):
                 dn = normalised_depth(out.depth, out.alpha)     # scale-free: lambdas mean the same on every scene
             if on["depth"] and dprior:
                 vals, valid, kind = dprior[vid]
-                dt = depth_loss(form, dn, vals, valid, kind, min_valid)
+                # the prior is compared with the depth of the covered part (D / alpha), never with D:
+                # 1 / D confounds coverage with depth (losses.expected_depth)
+                dt = depth_loss(form, expected_depth(dn, out.alpha), vals, valid, kind, min_valid)
                 if dt.loss is not None:
                     w = float(lam["depth"]) * dt.loss
                     total = total + w

@@ -1,0 +1,58 @@
+"""The plan of `gsbench claims`: every shipped grid the paper-claims table and its positive controls
+read, and the --quick variant of the same plan (tiny scale, two seeds) for CI and smoke checks.
+
+Why here: the claims command runs these grids with the ordinary grid machinery (run_grid, the
+executors, resume), so the plan is a list of grid names plus, for --quick, the overrides that
+shrink every cell; the report side (reports/claims.py) only reads the studies these grids record.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+from gsbench.grids.spec import Grid, SceneSpec, load_grid
+
+# the studies of the paper-claims table, then the positive controls (docs/grids.md)
+CLAIM_GRIDS: tuple[str, ...] = (
+    "ordering-cpu", "depth_formulation-cpu", "loss_subsets-cpu", "lambda_grid-cpu", "latent_dim-cpu",
+    "depth_noise-cpu",
+)
+CONTROL_GRIDS: tuple[str, ...] = (
+    "control_depth-cpu", "control_depth_noise-cpu", "control_ds-cpu", "control_latent-cpu", "control_sem-cpu",
+)
+
+QUICK_SEEDS = [0, 1]
+QUICK_RESOLUTION = [48, 36]   # synthetic scenes are generated this small under --quick
+QUICK_VIEWS = 10              # views of a synthetic scene that does not fix its own count
+QUICK_SET = {
+    "train.iterations": 20,
+    "train.max_width": 48,
+    "train.eval_every": 1000,
+    "train.checkpoint_every": 1000,
+    "train.log_every": 10,
+    "gaussiands.autoencoder.epochs": 5,
+    "eval.fps_warmup": 0,
+    "eval.fps_repeats": 1,
+}
+
+
+def plan_grids(quick: bool = False, names: tuple[str, ...] | None = None) -> list[Grid]:
+    """The grids the claims need, in running order; with `quick`, each shrunk to tiny scale and
+    two seeds (the same cells otherwise, so the quick run exercises every study and control)."""
+    out = []
+    for name in names if names is not None else CLAIM_GRIDS + CONTROL_GRIDS:
+        if not quick:
+            out.append(load_grid(name))
+            continue
+        g = load_grid(name, extra_set=dict(QUICK_SET))
+        g.seeds = [s for s in g.seeds if s in QUICK_SEEDS] or QUICK_SEEDS
+        g.scenes = [_quick_scene(s) for s in g.scenes]
+        out.append(g)
+    return out
+
+
+def _quick_scene(s: SceneSpec) -> SceneSpec:
+    """A synthetic scene at QUICK_RESOLUTION (its view count kept when the grid sets one); a scene
+    folder is kept as it is."""
+    if not s.preset:
+        return s
+    return replace(s, resolution=list(QUICK_RESOLUTION), views=s.views or QUICK_VIEWS)
