@@ -297,7 +297,7 @@ def test_gt_and_training_images_are_resized_as_3dgs_loads_them(lerf_scene):
     np.testing.assert_allclose(ours, ref, atol=1e-7)
     area = cv2.resize(np.asarray(lerf_scene.image(0), np.float32), (32, 24), interpolation=cv2.INTER_AREA)
     assert np.abs(area - ref).max() > 1.5 / 255                    # the rule matters
-    cfg = {"seed": 0, "train": {"max_width": 32, "eval_views": 0, "holdout": "every-8"}}
+    cfg = {"seed": 0, "train": {"max_width": 32, "eval_views": 0, "holdout": "every-8", "data_on": "device"}}
     views, size = load_views(lerf_scene, cfg)
     assert size == (32, 24)
     np.testing.assert_allclose(views.images[1].numpy(), np.asarray(

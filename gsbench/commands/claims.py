@@ -32,9 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from concurrent.futures.process import BrokenProcessPool
 
-    from gsbench import grids
-    from gsbench.grids.claims import CLAIM_GRIDS, CONTROL_GRIDS, plan_grids
-    from gsbench.grids.executors import make_executor
+    from gsbench import grids  # lazy: start-up (cli loads all commands)
+    from gsbench.grids.claims import CLAIM_GRIDS, CONTROL_GRIDS, plan_grids  # lazy: start-up (cli loads all commands)
+    from gsbench.grids.executors import make_executor  # lazy: start-up (cli loads all commands)
     names = tuple(args.grids) if args.grids else None
     unknown = [n for n in names or () if n not in CLAIM_GRIDS + CONTROL_GRIDS]
     if unknown:
@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
             if r and r.get("state") != "done":
                 print(f"failed: {r['run_dir']}: {r.get('error')}", file=sys.stderr)
     print(f"gsbench claims: {len(plan)} grids in {time.time() - t0:.0f} s" + (" (quick)" if args.quick else ""))
-    from gsbench.reports.build import build_report
+    from gsbench.reports.build import build_report  # lazy: start-up (cli loads all commands)
     summary = build_report(args.out, args.out / "report", progress=not args.no_progress)
     for t in ("paper_claims", "claims_controls"):
         if t in summary.tables:

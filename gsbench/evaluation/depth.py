@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gsbench.priors import warp as W
 from gsbench.results import DEPTH_METRICS
 
 from .block import Block, to_numpy
@@ -30,7 +31,6 @@ def depth_absrel(pred: np.ndarray, gt: np.ndarray) -> float | None:
 
 def depth_metrics(method, scene, ids: list[int], cams: list) -> Block:
     """depth_absrel on the held-out views (skipped with the reason when the scene has no GT depth)."""
-    from gsbench.priors import warp as W
     out = Block()
     if not getattr(scene, "has_depth", False):
         out.skip(DEPTH_METRICS, "scene has no GT depth")
