@@ -111,10 +111,7 @@ def resolve_semantics(cfg: dict, scene, drop: Drop) -> None:
     on = cfg["gaussiands"]["losses"]
     ok, why = semantic_source(cfg, scene)
     if not ok:
-        for k in ("sem", "ds"):
-            if on[k]:
-                on[k] = False
-                drop(f"gaussiands.losses.{k}", why)
+        _switch_off(on, ("sem", "ds"), "gaussiands.losses", why, drop)
     if not (on["sem"] or on["ds"]):
         reason = why if not ok else "nothing uses it (gaussiands.losses.sem and .ds are off)"
         for part in ("priors.masks", "priors.features", "gaussiands.autoencoder", "semantic_channels"):
@@ -177,6 +174,14 @@ def uses_twostage(cfg: dict) -> dict:
     return {"depth_prior": False, "semantics": bool(cfg["gaussiands"]["losses"]["sem"])}
 
 
+def _switch_off(on: dict, keys: tuple[str, ...], section: str, why: str, drop: Drop) -> None:
+    """Turn off the loss switches `keys` of `on` that are on, each recorded as dropped with `why`."""
+    for k in keys:
+        if on[k]:
+            on[k] = False
+            drop(f"{section}.{k}", why)
+
+
 def resolve_gaussiands(cfg: dict, scene, drop: Drop) -> None:
     g = cfg["gaussiands"]
     on = g["losses"]
@@ -185,10 +190,7 @@ def resolve_gaussiands(cfg: dict, scene, drop: Drop) -> None:
         drop("gaussiands.losses.depth", "gaussiands.depth_formulation=none")
     ok, why = depth_source(cfg, scene)
     if not ok:
-        for k in ("depth", "ds"):
-            if on[k]:
-                on[k] = False
-                drop(f"gaussiands.losses.{k}", f"no depth prior: {why}")
+        _switch_off(on, ("depth", "ds"), "gaussiands.losses", f"no depth prior: {why}", drop)
         drop("priors.depth", why)
     elif not (on["depth"] or on["ds"]):
         drop("priors.depth", "nothing uses it (gaussiands.losses.depth and .ds are off)")
@@ -208,10 +210,7 @@ def resolve_grouping(cfg: dict, scene, drop: Drop) -> None:
     drop("gaussiands.autoencoder", "method grouping has no autoencoder: queries go through the tracks' features")
     ok, why = semantic_source(cfg, scene)
     if not ok:
-        for k in ("identity", "reg3d"):
-            if on[k]:
-                on[k] = False
-                drop(f"grouping.losses.{k}", why)
+        _switch_off(on, ("identity", "reg3d"), "grouping.losses", why, drop)
     if on["reg3d"] and not on["identity"]:
         on["reg3d"] = False
         drop("grouping.losses.reg3d", "the 3D regulariser acts on the identity classes (grouping.losses.identity off)")
