@@ -32,6 +32,7 @@ QUICK_SET = {
     "gaussiands.autoencoder.epochs": 5,
     "eval.fps_warmup": 0,
     "eval.fps_repeats": 1,
+    "eval.previews": 0,       # the pictures are a quarter of a quick cell's evaluation and no claim reads them
 }
 
 
