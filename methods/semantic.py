@@ -30,6 +30,18 @@ def fit_autoencoder(mask_features: dict, ae_cfg: dict, latent_dim: int, seed: in
                              int(ae_cfg.get("epochs", 200)), float(ae_cfg.get("lr", 1e-3)), seed)
 
 
+def semantic_targets(masks: dict, mask_features: dict, ae_cfg: dict, latent_dim: int, seed: int,
+                     ae_state: dict | None, sizes: dict[int, tuple[int, int]], device: torch.device | str,
+                     on: str) -> tuple[FeatureAutoencoder, dict, SemanticTargets]:
+    """The autoencoder fitted on the mask features (or restored from `ae_state` on resume), moved to
+    `device`, and the per-view latent targets it encodes: what GaussianDS and twostage both start from."""
+    ae, stats = fit_autoencoder(mask_features, ae_cfg, latent_dim, seed)
+    if ae_state is not None:
+        ae.load_state_dict(ae_state)
+    ae = ae.to(device)
+    return ae, stats, build_targets(masks, mask_features, ae, sizes, device=device, on=on)
+
+
 def build_targets(masks: dict, mask_features: dict, ae: FeatureAutoencoder, sizes: dict[int, tuple[int, int]],
                   device: torch.device | str = "cpu", on: str = DEVICE) -> SemanticTargets:
     """Per-view latent target maps (built once, then kept on `device`, or on the host with on="host":

@@ -16,7 +16,7 @@ from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import fit_priors, run_trainer, uses
 from gsbench.methods.losses import sem_loss
 from gsbench.methods.residency import data_on
-from gsbench.methods.semantic import build_targets, fit_autoencoder
+from gsbench.methods.semantic import semantic_targets
 from gsbench.methods.trainer import LossResult, field_from_params, load_checkpoint_if_any
 from gsbench.methods.vanilla import rgb_loss_fn
 
@@ -62,14 +62,10 @@ class TwoStage(Method):
         self.info["priors_stats"] = dict(pri.stats)
         if pri.masks is None or pri.mask_features is None:
             raise ValueError(f"twostage: the priors gave no masks/features ({pri.skipped})")
-        ae, ae_stats = fit_autoencoder(pri.mask_features, g["autoencoder"], d, int(config["seed"]))
         ae_state = (ckpt or {}).get("extra", {}).get("autoencoder") if (ckpt or {}).get("phase") == "semantic" else None
-        if ae_state is not None:
-            ae.load_state_dict(ae_state)
-        self.autoencoder = ae.to(dev)
-        self.info["autoencoder"] = ae_stats
-        targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids}, device=dev,
-                                on=data_on(config))
+        self.autoencoder, self.info["autoencoder"], targets = semantic_targets(
+            pri.masks, pri.mask_features, g["autoencoder"], d, int(config["seed"]), ae_state,
+            {v: (W, H) for v in train_ids}, dev, data_on(config))
         has_any = {v: bool(targets.has_target[v].any()) for v in train_ids}
         if rgb_field is None:
             sem_field0 = field_from_params(ckpt["params"])

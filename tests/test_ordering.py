@@ -10,7 +10,7 @@ from gsbench.errors import InputError
 from gsbench.priors import ordering as O
 from gsbench.priors import prepare_priors
 from gsbench.scene import Camera
-from tests.test_priors_scene import make_sphere_scene
+from tests.priors_scene import make_sphere_scene
 
 
 def cams_at(centers, names=None):

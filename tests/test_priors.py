@@ -11,7 +11,7 @@ from gsbench.priors import cache as C
 from gsbench.priors import depth as D
 from gsbench.priors import features as F
 from gsbench.priors import segmenter as S
-from tests.test_priors_scene import make_sphere_scene
+from tests.priors_scene import make_sphere_scene
 
 CFG = {"ordering": "pose", "depth": {"provider": "gt", "noise": {"type": None, "severity": 0}},
        "masks": {"provider": "simulated", "severity": 1, "propagator": "flow"},

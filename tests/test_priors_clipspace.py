@@ -80,7 +80,7 @@ def test_float64_reference_of_a_cosine():
 def test_pipeline_mask_features_pass_lerf_relevancy_like_clip():
     """GT masks at the default noise and context: the own class beats the negatives, others mostly do not."""
     from gsbench.priors import prepare_priors
-    from tests.test_priors_scene import CLASS_NAMES, make_sphere_scene
+    from tests.priors_scene import CLASS_NAMES, make_sphere_scene
     scene = make_sphere_scene(3, 64, 48)
     p = prepare_priors(scene, {"masks": {"provider": "gt"}, "features": {"provider": "text-aligned"}},
                        [0, 1, 2], (64, 48), None, False, False, True, progress=False)

@@ -9,7 +9,7 @@ from gsbench.priors import depth as D
 from gsbench.priors import prepare_priors
 from gsbench.priors import warp as W
 from gsbench.scene import Camera
-from tests.test_priors_scene import make_sphere_scene
+from tests.priors_scene import make_sphere_scene
 
 
 def _affine_fit(x, y):

@@ -7,7 +7,7 @@ import pytest
 from gsbench.errors import InputError
 from gsbench.priors import CANONICAL_NEGATIVES, get_feature_provider, prepare_priors
 from gsbench.priors import features as F
-from tests.test_priors_scene import CLASS_NAMES, make_sphere_scene
+from tests.priors_scene import CLASS_NAMES, make_sphere_scene
 
 
 def test_text_vectors_unit_stateless_and_normalised_names():

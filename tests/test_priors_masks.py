@@ -8,7 +8,7 @@ from gsbench.errors import InputError
 from gsbench.priors import masks as M
 from gsbench.priors import prepare_priors
 from gsbench.priors import propagation as P
-from tests.test_priors_scene import make_sphere_scene
+from tests.priors_scene import make_sphere_scene
 
 
 def same_partition(a, b):

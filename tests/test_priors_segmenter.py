@@ -7,8 +7,8 @@ import pytest
 from gsbench.errors import InputError
 from gsbench.priors import prepare_priors
 from gsbench.priors import segmenter as S
+from tests.priors_scene import make_sphere_scene
 from tests.test_priors_masks import same_partition
-from tests.test_priors_scene import make_sphere_scene
 
 
 def rng(s=0):

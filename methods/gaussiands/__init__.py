@@ -23,7 +23,7 @@ from gsbench.methods.common import fit_priors, run_trainer, uses
 from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, expected_depth, normalised_depth,  # isort: skip
                                     reconstruction_loss, sem_loss, tv_loss)
 from gsbench.methods.residency import data_on, place
-from gsbench.methods.semantic import build_targets, fit_autoencoder
+from gsbench.methods.semantic import semantic_targets
 from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
 
 
@@ -53,13 +53,9 @@ class GaussianDS(Method):
                 raise ValueError(f"gaussiands: semantic losses are on but the priors gave no masks/features "
                                  f"({pri.skipped})")
             ae_state = (ckpt or {}).get("extra", {}).get("autoencoder")
-            ae, ae_stats = fit_autoencoder(pri.mask_features, g["autoencoder"], d, int(config["seed"]))
-            if ae_state is not None:
-                ae.load_state_dict(ae_state)
-            self.autoencoder = ae.to(dev)
-            self.info["autoencoder"] = ae_stats
-            targets = build_targets(pri.masks, pri.mask_features, ae, {v: (W, H) for v in train_ids}, device=dev,
-                                    on=data_on(config))
+            self.autoencoder, self.info["autoencoder"], targets = semantic_targets(
+                pri.masks, pri.mask_features, g["autoencoder"], d, int(config["seed"]), ae_state,
+                {v: (W, H) for v in train_ids}, dev, data_on(config))
         # ---- depth prior and its edges E_d (invariant to the per-iteration affine alignment, see losses.py)
         depth = pri.depth if use["depth_prior"] else None
         edges = {}

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.models
 from gsbench.errors import InputError  # noqa: E402
 from gsbench.priors import features as F  # noqa: E402
 from gsbench.priors import get_feature_provider, prepare_priors  # noqa: E402
-from tests.test_priors_scene import make_sphere_scene  # noqa: E402
+from tests.priors_scene import make_sphere_scene  # noqa: E402
 
 
 # ------------------------------------------------------------------------------ Depth Anything
