@@ -5,7 +5,7 @@ more memory than the Gaussians (docs/training.md#first-run-on-a-gpu); `host` tra
 host-to-device copy per step and view."""
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from typing import Any
 
 import torch
@@ -15,22 +15,23 @@ from gsbench.config_keys import DATA_PLACES as PLACES
 DEVICE, HOST = PLACES
 
 
-def _to(value: Any, device: torch.device, non_blocking: bool = False) -> Any:
-    """A tensor, or a tuple holding tensors (other items kept as they are), moved to `device`."""
+def _each(value: Any, fn: Callable[[torch.Tensor], torch.Tensor]) -> Any:
+    """`fn` applied to a tensor, or to each tensor of a tuple (other items kept as they are)."""
     if torch.is_tensor(value):
-        return value.to(device, non_blocking=non_blocking)
+        return fn(value)
     if isinstance(value, tuple):
-        return tuple(_to(v, device, non_blocking) for v in value)
+        return tuple(_each(v, fn) for v in value)
     return value
+
+
+def _to(value: Any, device: torch.device, non_blocking: bool = False) -> Any:
+    """A tensor, or a tuple holding tensors, moved to `device`."""
+    return _each(value, lambda t: t.to(device, non_blocking=non_blocking))
 
 
 def _pin(value: Any) -> Any:
     """Page-locked host memory, so the per-step copy to a CUDA device can run asynchronously."""
-    if torch.is_tensor(value):
-        return value.pin_memory()
-    if isinstance(value, tuple):
-        return tuple(_pin(v) for v in value)
-    return value
+    return _each(value, lambda t: t.pin_memory())
 
 
 class HostViews(Mapping):
