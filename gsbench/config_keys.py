@@ -4,7 +4,7 @@ A key's type comes from gsbench/configs/default.yaml (a bool default takes only 
 number default only numbers, ...). This table adds ranges and choices, and the type of keys whose
 default is null. A key of default.yaml without a rule here is type-checked only. The choices are
 spelled out here (not imported) so that reading a config imports no method, renderer or model library
-(this module is on the ground floor, docs/architecture.md); tests/test_config.py checks that they
+(this module is on the ground floor, docs/architecture.md); tests/core/test_config.py checks that they
 agree with the code that consumes them. The method names are read live from gsbench.method_table.
 """
 from __future__ import annotations

@@ -5,14 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from tiny import TINY_SCENE_ARGS, TINY_TRAIN_ARGS
 
 from gsbench.cli import main
-
-# tabletop-small at 32x24 with 8 views: 7 training views and 1 held-out view (LLFF hold-out of 8).
-TINY_SCENE_ARGS = ["--preset", "tabletop-small", "--views", "8", "--resolution", "32x24", "--seed", "0"]
-# A vanilla run of 2 iterations: a complete run folder in about a second.
-TINY_TRAIN_ARGS = ["--method", "vanilla", "--preset", "cpu-small", "--set", "train.iterations=2",
-                   "--set", "train.eval_every=0", "--no-progress"]
 
 
 @pytest.fixture(scope="session")

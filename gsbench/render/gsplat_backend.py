@@ -21,7 +21,7 @@ with the GPU, and training renders every step without a host synchronisation.
 gsplat computes in float32; a float64 field is cast (gradients flow back through the cast) and the
 outputs are cast back. gsplat's screen extent and tile tests are its own; they only differ from
 the shared rules where alpha < 1/255, so results match the `torch` backend to float32 rounding
-(tests/test_render_gsplat.py, run where CUDA exists).
+(tests/render/test_render_gsplat.py, run where CUDA exists).
 """
 from __future__ import annotations
 
