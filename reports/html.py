@@ -14,6 +14,7 @@ import pandas as pd
 
 from gsbench.reports.data import Results, is_null
 from gsbench.reports.table import Table
+from gsbench.store import write_text_atomic
 
 e = html.escape
 
@@ -127,7 +128,6 @@ def runs_html(res: Results) -> str:
 
 def write_index(path: Path, title: str, source: str, generated: str, sections: list[Section],
                 notes: list[str], res: Results, links: list[tuple[str, str]], writer_version: str) -> Path:
-    from gsbench.store import write_text_atomic
 
     body = [f"<h1>{e(title)}</h1>",
             f'<p class="meta">Source: <code>{e(source)}</code> · {len(res.runs)} runs · generated {e(generated)}</p>']

@@ -24,7 +24,10 @@ from gsbench.reports.spec import (AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_N
                                   LOGICAL, NOISE_LABELS, NOISE_ORDER, method_label, metric_spec)
 from gsbench.reports.stats import pearson  # noqa: E402
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, _slug, runs_of, scene_protocols  # noqa: E402
-from gsbench.reports.sweeps import lambda_points  # noqa: E402
+from gsbench.reports.sweeps import (
+    lambda_points,  # noqa: E402
+    latent_rows,
+)
 from gsbench.reports.table import Table  # noqa: E402
 from gsbench.store import read_jsonl, write_bytes_atomic  # noqa: E402
 
@@ -371,7 +374,6 @@ def plot_latent(res: Results, path_prefix: Path) -> list[Path]:
             continue
         ref = [r for r in sids if res.runs.at[r, "method"] != "gaussiands"]
         fig, axs = plt.subplots(2, 2, figsize=(10, 7.5))
-        from gsbench.reports.sweeps import latent_rows
         mem = latent_rows(res, sids)[1]
         for ax, m in zip(axs.flat, ["miou", "psnr", "train_s", mem]):
             concrete = res.resolve(m, pr)

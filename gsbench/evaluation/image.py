@@ -15,6 +15,9 @@ import numpy as np
 
 from gsbench.datasets.imageio import resize_rgb
 from gsbench.errors import InputError
+from gsbench.metrics import image as MI
+from gsbench.metrics import perceptual as MP
+from gsbench.metrics import timing
 
 from .block import Block, to_numpy
 from .frames import size_text, view_name
@@ -34,8 +37,6 @@ def image_metrics(method, scene, ids: list[int], cams: list, config: dict, progr
     """PSNR / SSIM / LPIPS (both forms of each) of the renders of views `ids` (cameras `cams`)."""
     from tqdm import tqdm
 
-    from gsbench.metrics import image as MI
-    from gsbench.metrics import perceptual as MP
     out = Block()
     names_all = ("psnr", *SSIM_FORMS, *LPIPS_FORMS)
     if not ids:
@@ -80,7 +81,6 @@ def image_metrics(method, scene, ids: list[int], cams: list, config: dict, progr
 
 def fps(method, cams: list, config: dict) -> Block:
     """Median render time of the given cameras after warm-up (CUDA synchronised when it is in use)."""
-    from gsbench.metrics import timing
     out = Block()
     if not cams:
         out.skip(("fps",), "no camera to time")

@@ -8,13 +8,14 @@ from typing import Optional
 import cv2
 import numpy as np
 
+from gsbench.datasets.ovs import label_masks as rasterise
+from gsbench.datasets.ovs import read_lerf_label
 from gsbench.errors import InputError
 from gsbench.metrics import resize_nearest
 
 
 def read_label_file(path: Path) -> tuple[int, int, list]:
     """(width, height, label objects) of a LERF-OVS label file; the size comes from `info`."""
-    from gsbench.datasets.ovs import read_lerf_label
     info, objs = read_lerf_label(path)
     try:
         w, h = int(info["width"]), int(info["height"])
@@ -30,7 +31,6 @@ def label_masks(labels: list, src_w: int, src_h: int, width: int, height: int) -
     a category OR-ed} and {query: (K, 4) boxes or None}. The polygons are rasterised on their own grid
     (cv2.fillPoly on int32 points, the protocol) and resized by centre sampling when the evaluation
     size differs, so a prediction that is the GT resampled the same way scores exactly 1."""
-    from gsbench.datasets.ovs import label_masks as rasterise
     sx, sy = width / float(src_w), height / float(src_h)
     masks = {q: resize_nearest(m, width, height) for q, m in rasterise(labels, src_h, src_w).items()}
     boxes: dict[str, list] = {q: [] for q in masks}

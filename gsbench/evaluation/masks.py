@@ -17,9 +17,13 @@ from typing import Optional
 
 import numpy as np
 
+from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError
 from gsbench.metrics import NEAREST_IMPL, resize_nearest
+from gsbench.metrics import segmentation as M
+from gsbench.metrics.ovs3d import PIXEL_ACC_IMPL, pixel_accuracy
 from gsbench.results import run_results
+from gsbench.store import write_json_atomic
 
 from .block import Block
 from .labels import check_aspect, label_masks, lerf_label_files, query_file, read_label_file, read_mask
@@ -32,7 +36,6 @@ def score_mask_folder(pred_dir: str | os.PathLike, layout_dir: str | os.PathLike
                       out_dir: Optional[str | os.PathLike] = None, dilation_ratio: float = 0.02) -> dict:
     """Score predicted masks against a LERF-OVS label folder or a 3D-OVS scene; writes
     out_dir/results.json (default: pred_dir/results.json)."""
-    from gsbench.environment import PeakMemory, env_info
     peaks = PeakMemory().start()
     pred_dir, layout_dir = Path(pred_dir), Path(layout_dir)
     if not pred_dir.is_dir():
@@ -59,7 +62,6 @@ def score_mask_folder(pred_dir: str | os.PathLike, layout_dir: str | os.PathLike
 
 
 def write_results(out: Path, res: dict) -> None:
-    from gsbench.store import write_json_atomic
     write_json_atomic(out / "results.json", res)
 
 
@@ -77,7 +79,6 @@ def _mean(values: list) -> Optional[float]:
 
 
 def score_lerf_folder(pred_dir: Path, layout_dir: Path, ratio: float) -> tuple[Block, dict]:
-    from gsbench.metrics import segmentation as M
     out = Block()
     pairs, missing, view_names, view_miou, sizes = [], [], [], [], set()
     labels = [(lf, *read_label_file(lf)) for lf in lerf_label_files(layout_dir)]
@@ -136,8 +137,6 @@ def _read_gt(vd: Path, classes: list[str]) -> dict:
 
 
 def score_3dovs_folder(pred_dir: Path, layout_dir: Path, ratio: float) -> tuple[Block, dict]:
-    from gsbench.metrics import segmentation as M
-    from gsbench.metrics.ovs3d import PIXEL_ACC_IMPL, pixel_accuracy
     out = Block()
     seg = layout_dir / "segmentations"
     classes_txt = seg / "classes.txt"

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from gsbench.metrics import resize_nearest
+from gsbench.metrics.image import quantize_uint8
 from gsbench.results import REMOVAL_METRICS
 
 from .block import Block, to_numpy
@@ -19,7 +20,6 @@ REMOVAL_RESIDUAL_TAU = 0.1   # an object pixel is "residual" if mean |RGB - GT w
 def view_removal_metrics(pred: np.ndarray, gt_removed: np.ndarray, obj: np.ndarray) -> tuple[float, float | None]:
     """(residual, PSNR outside the object or None when the object fills the view) of one render after
     removal, against the GT render without the object; `obj` (H, W) bool must have a pixel."""
-    from gsbench.metrics.image import quantize_uint8
     diff = np.abs(pred - gt_removed).mean(axis=-1)
     res = float(np.count_nonzero(diff[obj] > REMOVAL_RESIDUAL_TAU)) / float(np.count_nonzero(obj))
     outside = ~obj

@@ -9,7 +9,10 @@ import time
 from pathlib import Path
 from typing import Any, Optional
 
+from gsbench.environment import PeakMemory, env_info
+from gsbench.metrics import ordering as MO
 from gsbench.results import ORDERING_METRICS, SEG_BASES, run_results, seg_metric
+from gsbench.runlock import RunLock
 from gsbench.store import read_json, write_json_atomic
 
 from .block import Block
@@ -28,7 +31,6 @@ def _read_optional(path: Path) -> dict:
 
 
 def _ordering(run_dir: Path) -> Block:
-    from gsbench.metrics import ordering as MO
     out = Block()
     summary = _read_optional(run_dir / "train_summary.json")
     stats = (summary.get("info") or {}).get("priors_stats") or summary.get("priors_stats") or {}
@@ -78,7 +80,6 @@ def requested_protocol(protocol: Optional[str], config: dict) -> str:
 def evaluate_run(run_dir: str | os.PathLike, protocol: Optional[str] = None, progress: bool = True) -> dict:
     """Evaluate a trained run and write run_dir/results.json (schema: gsbench.results), holding the
     run folder's writer lock. protocol None = the run config's eval.protocol."""
-    from gsbench.runlock import RunLock
     with RunLock(Path(run_dir), command="gsbench eval"):
         return _evaluate_run(Path(run_dir), protocol, progress)
 
@@ -86,9 +87,8 @@ def evaluate_run(run_dir: str | os.PathLike, protocol: Optional[str] = None, pro
 def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dict:
     import torch
 
-    from gsbench.environment import PeakMemory, env_info
-    from gsbench.runs import load_run
     t_start = time.time()
+    from gsbench.runs import load_run  # lazy: gsbench.runs imports gsbench.evaluation (same-floor cycle)
     method, config, scene = load_run(run_dir)
     peaks = PeakMemory(getattr(method, "device", None)).start()
     protocol = requested_protocol(protocol, config)

@@ -17,6 +17,7 @@ from typing import Optional
 import numpy as np
 
 from gsbench.errors import InputError
+from gsbench.metrics import lerf, ovs3d
 from gsbench.results import FRAME_SET_SUFFIX, QUERY_MODES, SEG_BASES, seg_metric
 
 from .block import Block, to_numpy
@@ -82,7 +83,6 @@ def frame_outputs(method, scene, ids_by_protocol: dict, config: dict, modes: tup
     GT masks, GT boxes). Frames are visited one at a time; each distinct camera is rendered once for
     all protocols and modes and its features are dropped before the next frame.
     """
-    from gsbench.metrics import lerf, ovs3d
     text_memo: dict = {}
 
     def text(texts: list[str], mode: str):
@@ -126,7 +126,6 @@ def score_3dovs(method, scene, ids: list[int], config: dict, mode: str, configur
                 frame_set: str, frames: Optional[dict] = None) -> Block:
     """3D-OVS metrics of frames `ids` in one query mode (`frames`: `frame_outputs` covering them,
     computed here when not given)."""
-    from gsbench.metrics import ovs3d
     out = Block()
     names = _names("3dovs", mode, configured, frame_set)
     every = [n for ns in names.values() for n in ns]
@@ -174,7 +173,6 @@ def score_lerf(method, scene, ids: list[int], config: dict, mode: str, configure
                frames: Optional[dict] = None) -> Block:
     """LERF-OVS metrics of frames `ids` in one query mode (relevancy against the canonical negatives;
     `frames`: `frame_outputs` covering them, computed here when not given)."""
-    from gsbench.metrics import lerf
     out = Block()
     names = _names("lerf", mode, configured, frame_set)
     every = [n for ns in names.values() for n in ns]

@@ -3,6 +3,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from gsbench.datasets import load_scene
+from gsbench.environment import env_info
+from gsbench.evaluation import resolve_protocols
+from gsbench.results import failed_results
 from gsbench.store import read_json, write_json_atomic
 
 
@@ -10,8 +14,6 @@ def write_failed_results(spec: dict, run_dir: Path, status: dict) -> dict:
     """results.json of a failed cell (schema and builder: gsbench.results): status "failed", every
     metric null with the error as its reason. Identity fields come from the run's config.json when
     training got that far (the resolved config), else from the cell's config."""
-    from gsbench.environment import env_info
-    from gsbench.results import failed_results
     cfg_path = run_dir / "config.json"
     config = spec.get("config") or {}
     try:
@@ -21,8 +23,6 @@ def write_failed_results(spec: dict, run_dir: Path, status: dict) -> dict:
         pass
     scene_name, protocols = None, []
     try:   # name and protocols as evaluate_run would record them, so the failed cell shares their columns
-        from gsbench.datasets import load_scene
-        from gsbench.evaluation import resolve_protocols
         scene = load_scene(spec["scene_path"])
         scene_name = scene.name or Path(scene.path).name
         protocols, _ = resolve_protocols(scene, "auto")

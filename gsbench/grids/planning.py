@@ -8,7 +8,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
 
-from gsbench.config import get_dotted
+from gsbench.config import get_dotted, load_config
+from gsbench.config import run_id as make_run_id
+from gsbench.datasets import scene_fingerprint
+from gsbench.datasets.synthetic import make_scene
 from gsbench.errors import InputError
 from gsbench.grids.spec import Cell, Grid, SceneSpec
 from gsbench.store import write_json_atomic
@@ -33,7 +36,6 @@ def resolve_scene(spec: SceneSpec, runs_dir: Path, create: bool = True) -> Optio
         return out
     if not create:
         return None
-    from gsbench.datasets.synthetic import make_scene
     tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
     tmp.parent.mkdir(parents=True, exist_ok=True)
     kwargs: dict[str, Any] = {"seed": spec.seed}
@@ -58,7 +60,6 @@ def resolve_scene(spec: SceneSpec, runs_dir: Path, create: bool = True) -> Optio
 def cell_config(cell: Cell, runs_dir: Path, grid_axis_keys: list[str]) -> dict:
     """The resolved config of a cell: default <- preset <- base.set <- axes, plus the shared priors
     cache and the study/grid record (reports read them from results.json)."""
-    from gsbench.config import load_config
     overrides = dict(cell.overrides)
     overrides["priors.cache_dir"] = str((runs_dir / CACHE_DIRNAME).resolve())
     config = load_config(cell.method, cell.preset, overrides)   # {dotted key: value}, no YAML round trip
@@ -90,8 +91,6 @@ class PlannedCell:
 
 def plan(grid: Grid, runs_dir: Path, create_scenes: bool = True) -> list[PlannedCell]:
     """Resolve scenes (generating presets once), configs and run ids of every cell."""
-    from gsbench.config import run_id as make_run_id
-    from gsbench.datasets import scene_fingerprint
     runs_dir = Path(runs_dir)
     scene_paths: dict[str, Optional[Path]] = {}
     fingerprints: dict[str, str] = {}

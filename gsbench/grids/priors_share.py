@@ -6,13 +6,18 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Optional
 
+from gsbench.datasets import load_scene
+from gsbench.errors import InputError
+from gsbench.grids.executors import apply_thread_budget
 from gsbench.grids.planning import PlannedCell
+from gsbench.methods.device import resolve_device
+from gsbench.methods.registry import priors_request as method_priors_request
+from gsbench.priors import prepare_priors
 
 
 def priors_request(spec: dict) -> Optional[dict]:
     """The priors entry the cell's method will ask for (the method registry builds the same request
     that fit() uses), or None when it needs no priors. Cells with equal requests share one cache entry."""
-    from gsbench.methods.registry import priors_request as method_priors_request
     return method_priors_request(spec["config"], spec["scene_path"])
 
 
@@ -20,9 +25,6 @@ def prepare_priors_job(request: dict) -> dict:
     """Compute one shared priors entry into the cache (run through the executor before the cells)."""
     t0 = time.time()
     try:
-        from gsbench.datasets import load_scene
-        from gsbench.grids.executors import apply_thread_budget
-        from gsbench.priors import prepare_priors
         apply_thread_budget()
         scene = load_scene(request["scene_path"])
         pri = prepare_priors(scene, request["priors"], request["view_ids"], tuple(request["size"]),
@@ -36,8 +38,6 @@ def prepare_priors_job(request: dict) -> dict:
 
 
 def _training_device(config: dict) -> Optional[str]:
-    from gsbench.errors import InputError
-    from gsbench.methods.device import resolve_device
     try:
         return str(resolve_device(config))
     except InputError:      # the cell fails with this error when it runs

@@ -12,12 +12,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from gsbench.evaluation import evaluate_run
+from gsbench.grids.executors import apply_thread_budget
 from gsbench.grids.failed import write_failed_results
 from gsbench.grids.liveness import CELL_FILE, CELL_STATUS_FILE, HEARTBEAT_S, cell_state, read_cell_status
 from gsbench.grids.planning import PlannedCell, plan, write_manifest
 from gsbench.grids.priors_share import shared_priors
 from gsbench.grids.spec import Grid
+from gsbench.methods.device import prebuild_for
 from gsbench.runlock import RunLock, RunLockedError
+from gsbench.runs import train_run
 from gsbench.store import write_json_atomic
 
 log_ = logging.getLogger(__name__)
@@ -91,10 +95,7 @@ def _run_cell_locked(spec: dict, run_dir: Path) -> dict:
 
 
 def _train_and_evaluate(spec: dict, run_dir: Path, status: dict) -> None:
-    from gsbench.evaluation import evaluate_run
-    from gsbench.grids.executors import apply_thread_budget
     status["torch_threads"] = apply_thread_budget()
-    from gsbench.runs import train_run
     train_run(copy.deepcopy(spec["config"]), spec["scene_path"], run_dir, progress=False)
     status["phase"] = "eval"
     write_json_atomic(run_dir / CELL_STATUS_FILE, status)
@@ -139,7 +140,6 @@ def run_grid(grid: Grid, runs_dir: Path, executor: Any, retry_failed: bool = Fal
         + f"; dispatching {len(todo)}" + ("" if retry_failed or not counts["failed"]
                                           else " (failed cells skipped; use --retry-failed)"))
     if todo:    # gsplat's one-time CUDA build here, not in several workers at once
-        from gsbench.methods.device import prebuild_for
         prebuild_for(pc.config for pc in todo)
     if todo and share_priors:
         shared_priors(todo, executor, log)

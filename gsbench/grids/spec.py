@@ -16,6 +16,7 @@ from typing import Any, Optional
 import yaml
 
 from gsbench.config import check_value, default_tree, flatten, load_tree, load_yaml, parse_overrides, preset_path
+from gsbench.datasets import synthetic
 from gsbench.errors import InputError
 
 GRID_DIR = Path(__file__).parent
@@ -171,13 +172,8 @@ def _parse_scene(item: Any, where: str) -> SceneSpec:
     return spec
 
 
-def _known_presets() -> Optional[set[str]]:
-    try:
-        from gsbench.datasets import synthetic
-    except ImportError:
-        return None
-    presets = getattr(synthetic, "PRESETS", None)
-    return set(presets) if presets is not None else None
+def _known_presets() -> set[str]:
+    return set(synthetic.PRESETS)
 
 
 def find_grid(name_or_path: str | os.PathLike) -> Path:

@@ -5,13 +5,9 @@ import math
 import os
 
 import pytest
+from pool_jobs import worker_info
 
 from gsbench.grids.executors import LocalExecutor, SubmititExecutor, apply_thread_budget, make_executor
-
-
-def worker_info(x: int) -> tuple[int, str, str, int]:
-    import os
-    return x * x, os.environ.get("OMP_NUM_THREADS", ""), os.environ.get("GSBENCH_THREADS", ""), os.getpid()
 
 
 def test_local_pool_keeps_order_and_sets_threads():
