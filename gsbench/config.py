@@ -27,6 +27,7 @@ import yaml
 
 from gsbench.config_keys import FREE_MAPPINGS, METHODS, RULES, Rule
 from gsbench.errors import InputError
+from gsbench.method_table import get_spec, section_defaults
 
 CONFIG_DIR = Path(__file__).parent / "configs"
 # keys that do not change what a run computes (where files go, how often it logs)
@@ -66,8 +67,15 @@ def _read_yaml(path: Path) -> dict:
 
 
 def default_tree() -> dict:
-    """The full default tree; its leaves are the keys (and their types) every config is checked against."""
-    return _read_yaml(CONFIG_DIR / "default.yaml")
+    """The full default tree; its leaves are the keys (and their types) every config is checked against:
+    default.yaml plus the own section of every registered method that brings one (a plugin's spec
+    `defaults`; a section default.yaml already has cannot be redefined)."""
+    tree = _read_yaml(CONFIG_DIR / "default.yaml")
+    for section, defaults in section_defaults().items():
+        if section in tree:
+            raise InputError(f"a method's config section {section!r} is already a section of default.yaml")
+        tree[section] = defaults
+    return tree
 
 
 def flatten(tree: Mapping, prefix: str = "") -> dict[str, Any]:
@@ -265,6 +273,12 @@ def _canonical(cfg: dict) -> dict:
             d.pop(path[-1], None)
     for k in ("dropped", "resolved", "scene", "run_id"):
         c.pop(k, None)
+    # another method's own section (a plugin's) does not change this run: an installed plugin leaves
+    # the run ids of every other method as they were
+    own = get_spec(c["method"]).section if "method" in c else None
+    for section in section_defaults():
+        if section != own:
+            c.pop(section, None)
     return c
 
 

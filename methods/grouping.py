@@ -37,6 +37,7 @@ from gsbench.errors import InputError
 from gsbench.gaussians import SH_C0
 from gsbench.methods.base import Method, _check_mode, _unit, load_views, scene_init
 from gsbench.methods.common import fit_priors, semantic_eval, uses
+from gsbench.methods.grouping_spec import budget
 from gsbench.methods.losses import reconstruction_loss
 from gsbench.methods.residency import data_on, place
 from gsbench.methods.trainer import LossResult, Trainer, load_checkpoint_if_any, periodic_eval
@@ -298,6 +299,4 @@ class GaussianGrouping(Method):
             self.classifier.eval()
         self.info["n_gaussians"] = self.field.num
         self.info["device"] = str(dev)
-        steps = int(config["train"]["iterations"])
-        # one joint phase: every step trains the identity encodings and the classifier with RGB
-        self.info["budget"] = {"rgb_steps": steps, "semantic_steps": steps if semantic else 0}
+        self.info["budget"] = budget(config)   # one joint phase: identity, classifier and RGB every step

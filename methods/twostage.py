@@ -18,14 +18,8 @@ from gsbench.methods.losses import sem_loss
 from gsbench.methods.residency import data_on
 from gsbench.methods.semantic import semantic_targets
 from gsbench.methods.trainer import LossResult, field_from_params, load_checkpoint_if_any
+from gsbench.methods.twostage_spec import budget, semantic_budget
 from gsbench.methods.vanilla import rgb_loss_fn
-
-
-def semantic_budget(config: dict) -> int:
-    """Stage 2's steps: `twostage.semantic_iterations`, or (null) as many semantic steps as GaussianDS
-    takes in the same config (`train.iterations`: each of its joint steps is a semantic step)."""
-    v = (config.get("twostage") or {}).get("semantic_iterations")
-    return int(config["train"]["iterations"]) if v is None else int(v)
 
 
 class TwoStage(Method):
@@ -48,8 +42,7 @@ class TwoStage(Method):
                                     rgb_loss_fn(float(config["train"]["lambda_dssim"])),
                                     phase="rgb", backend=self._backend, progress=progress, resume=ckpt)
         self.info["device"] = str(dev)
-        self.info["budget"] = {"rgb_steps": int(config["train"]["iterations"]),
-                               "semantic_steps": sem_steps if uses(config)["semantics"] else 0}
+        self.info["budget"] = budget(config)
         if not uses(config)["semantics"]:
             self.field = rgb_field
             self.info["n_gaussians"] = self.field.num

@@ -9,6 +9,7 @@ from gsbench.methods.base import Method, load_views, scene_init
 from gsbench.methods.common import run_trainer
 from gsbench.methods.losses import reconstruction_loss
 from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
+from gsbench.methods.vanilla_spec import budget
 
 
 def rgb_loss_fn(lam_dssim: float):
@@ -34,4 +35,4 @@ class Vanilla(Method):
                                  resume=load_checkpoint_if_any(run_dir))
         self.info["n_gaussians"] = self.field.num
         self.info["device"] = str(dev)
-        self.info["budget"] = {"rgb_steps": int(config["train"]["iterations"]), "semantic_steps": 0}
+        self.info["budget"] = budget(config)

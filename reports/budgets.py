@@ -2,9 +2,8 @@
 method, so a reader sees whether the methods compared had the same number of steps.
 
 Source, in this order: the collected columns budget.<key> (results.json `budget` flattened by
-collect), the run's results.json `budget` dict, else the run's resolved config (train.iterations;
-semantic steps: twostage.semantic_iterations for twostage, every joint step for gaussiands and grouping,
-none for vanilla). The source is shown per row.
+collect), the run's results.json `budget` dict, else the run's resolved config read by the method's
+own budget rule (its spec, e.g. methods/twostage_spec.py). The source is shown per row.
 """
 from __future__ import annotations
 
@@ -12,6 +11,8 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from gsbench.methods.registry import METHODS
+from gsbench.methods.registry import budget as method_budget
 from gsbench.reports.data import Results, is_null
 from gsbench.reports.spec import method_label
 from gsbench.reports.studies import ordered_methods
@@ -19,8 +20,6 @@ from gsbench.reports.table import Cell, Column, Row, Table
 from gsbench.store import read_json
 
 log = logging.getLogger(__name__)
-JOINT_SEMANTICS = ("gaussiands", "grouping")  # the semantic field is optimised at every training step
-NO_SEMANTICS = ("vanilla",)
 
 
 def _int(v: Any) -> int | None:
@@ -32,39 +31,37 @@ def _int(v: Any) -> int | None:
         return None
 
 
-def run_budget(res: Results, rid: str) -> tuple[int | None, int | None, str]:
-    """(iterations, semantic steps, source) of one run; None where unknown or not applicable."""
+def run_budget(res: Results, rid: str) -> tuple[int | None, int | None, str, str | None]:
+    """(iterations, semantic steps, source, schedule) of one run; None where unknown or not applicable.
+    schedule: where the semantic steps sit ("joint", "after rgb", "none"), from the method's budget rule."""
     cols = res.runs.columns
     if "budget.iterations" in cols and not is_null(res.runs.at[rid, "budget.iterations"]):
         sem = res.runs.at[rid, "budget.semantic_iterations"] if "budget.semantic_iterations" in cols else None
-        return _int(res.runs.at[rid, "budget.iterations"]), _int(sem), "results budget"
+        return _int(res.runs.at[rid, "budget.iterations"]), _int(sem), "results budget", None
     path = Path(str(res.runs.at[rid, "run_dir"])) / "results.json"
     try:
         data = read_json(path)
     except Exception as exc:  # a collected table read without its run folders
         log.debug("%s: no budget (%s)", path, exc)
-        return None, None, "unknown (results.json not readable)"
+        return None, None, "unknown (results.json not readable)", None
     if not isinstance(data, dict):
-        return None, None, "unknown (results.json not an object)"
+        return None, None, "unknown (results.json not an object)", None
     budget = data.get("budget")
     if isinstance(budget, dict) and "rgb_steps" in budget:       # what the methods record (train_summary info)
         sem = _int(budget.get("semantic_steps"))
-        return _int(budget.get("rgb_steps")), (sem or None), "results budget"
+        return _int(budget.get("rgb_steps")), (sem or None), "results budget", budget.get("schedule")
     if isinstance(budget, dict) and "iterations" in budget:
-        return _int(budget.get("iterations")), _int(budget.get("semantic_iterations")), "results budget"
+        return _int(budget.get("iterations")), _int(budget.get("semantic_iterations")), "results budget", None
     cfg = data.get("config") if isinstance(data.get("config"), dict) else {}
-    train = cfg.get("train") if isinstance(cfg.get("train"), dict) else {}
-    it = _int(train.get("iterations"))
     method = str(res.runs.at[rid, "method"])
-    if method in NO_SEMANTICS:
-        sem = None
-    elif method in JOINT_SEMANTICS:
-        sem = it
-    else:
-        two = cfg.get("twostage") if isinstance(cfg.get("twostage"), dict) else {}
-        sem = _int(two.get("semantic_iterations"))
-        sem = it if sem is None else sem          # null = as many semantic steps as GaussianDS (train.iterations)
-    return it, sem, "resolved config" if it is not None else "unknown (no train.iterations)"
+    if method not in METHODS:
+        return None, None, f"unknown (method {method} is not registered here)", None
+    try:   # the method's own budget rule (its spec), on the run's resolved config
+        b = method_budget({**cfg, "method": method})
+    except (KeyError, TypeError, ValueError) as exc:
+        log.debug("%s: no budget from the config (%s)", path, exc)
+        return None, None, "unknown (the run's config lacks what the budget rule reads)", None
+    return _int(b["rgb_steps"]), (_int(b["semantic_steps"]) or None), "resolved config", b.get("schedule")
 
 
 def budget_table(res: Results) -> list[Table]:
@@ -79,10 +76,10 @@ def budget_table(res: Results) -> list[Table]:
                 if res.runs.at[rid, "method"] == meth:
                     key = run_budget(res, rid)
                     seen[key] = seen.get(key, 0) + 1
-            for (it, sem, src), n in seen.items():
-                sem_text = ("– (no semantic field)" if meth in NO_SEMANTICS else
+            for (it, sem, src, schedule), n in seen.items():
+                sem_text = ("– (no semantic field)" if schedule == "none" else
                             "n/a (unknown)" if sem is None else
-                            f"{sem} (joint)" if meth in JOINT_SEMANTICS and src == "resolved config" else str(sem))
+                            f"{sem} (joint)" if schedule == "joint" else str(sem))
                 rows.append(Row(["(standalone)" if st is None else str(st), method_label(meth)],
                                 [Cell(text=str(it) if it is not None else "n/a (unknown)"), Cell(text=sem_text),
                                  Cell(text=src), Cell(text=str(n))]))

@@ -2,8 +2,9 @@
 measured effect with its 95 % interval, the minimum detectable effect (MDE) at its n, and a verdict
 that follows only from that interval.
 
-Why a data table: the paper's numbers live in one place (PAPER_CLAIMS, each with the section and
-table or figure it comes from), and the verdict rules are the same for every row. Interval and
+Why a data table: the paper's numbers live beside the method (methods/gaussiands/paper.py,
+PAPER_CLAIMS, each with the section and table or figure it comes from), and the verdict rules are
+the same for every row. Interval and
 paper number are in the same display units (PSNR in dB, IoU in %, r as is):
 - claim with a number P (sized against the paper; "above"/"below" read on the paper's side of zero):
   reproduced when the interval excludes zero on P's side and reaches P; smaller than claimed when it
@@ -20,15 +21,14 @@ paper number are in the same display units (PSNR in dB, IoU in %, r as is):
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
+from gsbench.methods.gaussiands.paper import MAX, PAPER_CLAIMS, ROBUST_MARGIN_DB, Claim
 from gsbench.reports.ablations import _covered, run_dropped
 from gsbench.reports.controls import blind_claims
 from gsbench.reports.data import Results, same
-
-from gsbench.reports.spec import (AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
-                                  AX_ORDERING, metric_spec)
+from gsbench.reports.spec import metric_spec
 from gsbench.reports.stats import Diff, compare, mde_r, pearson, pearson_interval
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
 from gsbench.reports.sweeps import lambda_points
@@ -37,87 +37,6 @@ from gsbench.reports.table import Cell, Column, Row, Table
 REPRODUCED, OPPOSITE, INCONCLUSIVE, NOT_RUN, NOT_TESTABLE = (
     "reproduced", "opposite", "inconclusive", "not run", "not testable")
 SMALLER, NOT_REPRODUCED = "smaller than claimed", "not reproduced"
-ROBUST_MARGIN_DB = 0.5  # gsbench's equivalence margin for "PSNR is robust" (dB), not the paper's
-MAX = "max"             # selector value: the highest value of that axis among the study's runs
-
-
-@dataclass(frozen=True)
-class Claim:
-    key: str
-    text: str                  # the claim in words
-    source: str                # section and table / figure of the paper
-    study: str
-    metric: str                # logical metric ('miou' resolves per protocol)
-    direction: int             # +1 / -1: the paper's sign of (row - reference); 0: no effect claimed
-    paper: float | None        # the paper's number (difference or r) in display units, None = none given
-    paper_note: str = ""
-    row: dict = field(default_factory=dict)        # axis -> value of the compared row
-    reference: dict = field(default_factory=dict)  # axis -> value of the row it is compared with
-    correlation: str | None = None                 # lambda axis: Pearson r with the metric instead
-
-
-_ALL = {AX_LOSSES[0]: True, AX_LOSSES[1]: True, AX_LOSSES[2]: True}
-_NONE = {AX_LOSSES[0]: False, AX_LOSSES[1]: False, AX_LOSSES[2]: False}
-_ABL = "Sec. Ablation Studies"
-PAPER_CLAIMS: list[Claim] = [
-    Claim("depth_ss_raw_psnr", "scale-shift beats raw L1 depth (PSNR)", f"{_ABL}, Table tab-depth-align (bench)",
-          "depth_formulation", "psnr", +1, 24.81 - 21.31, "24.81 vs 21.31 dB",
-          {AX_FORMULATION: "scale_shift"}, {AX_FORMULATION: "raw_l1"}),
-    Claim("depth_mm_raw_psnr", "min-max beats raw L1 depth (PSNR)", f"{_ABL}, Table tab-depth-align (bench)",
-          "depth_formulation", "psnr", +1, 23.93 - 21.31, "23.93 vs 21.31 dB",
-          {AX_FORMULATION: "minmax"}, {AX_FORMULATION: "raw_l1"}),
-    Claim("depth_ss_mm_psnr", "scale-shift beats min-max depth (PSNR)", f"{_ABL}, Table tab-depth-align (bench)",
-          "depth_formulation", "psnr", +1, 24.81 - 23.93, "24.81 vs 23.93 dB",
-          {AX_FORMULATION: "scale_shift"}, {AX_FORMULATION: "minmax"}),
-    Claim("depth_ss_raw_mbiou", "scale-shift beats raw L1 depth (mBIoU)", f"{_ABL}, Table tab-depth-align (bench)",
-          "depth_formulation", "mbiou", +1, 91.99 - 59.69, "91.99 vs 59.69 %",
-          {AX_FORMULATION: "scale_shift"}, {AX_FORMULATION: "raw_l1"}),
-    Claim("depth_ss_mm_mbiou", "scale-shift beats min-max depth (mBIoU)", f"{_ABL}, Table tab-depth-align (bench)",
-          "depth_formulation", "mbiou", +1, 91.99 - 89.21, "91.99 vs 89.21 %",
-          {AX_FORMULATION: "scale_shift"}, {AX_FORMULATION: "minmax"}),
-    Claim("loss_depth_psnr", "L_depth alone raises PSNR over no auxiliary loss", f"{_ABL}, Table tab-ablation (bench)",
-          "loss_subsets", "psnr", +1, 22.46 - 16.02, "22.46 vs 16.02 dB",
-          {**_NONE, AX_LOSSES[0]: True}, _NONE),
-    Claim("loss_ds_miou", "L_ds alone raises mIoU over no auxiliary loss", f"{_ABL}, Table tab-ablation (bench)",
-          "loss_subsets", "miou", +1, 84.40 - 47.10, "84.40 vs 47.10 %",
-          {**_NONE, AX_LOSSES[2]: True}, _NONE),
-    Claim("loss_all_psnr", "all three losses raise PSNR over none", f"{_ABL}, Table tab-ablation (bench)",
-          "loss_subsets", "psnr", +1, 24.81 - 16.02, "24.81 vs 16.02 dB", _ALL, _NONE),
-    Claim("loss_all_miou", "all three losses raise mIoU over none", f"{_ABL}, Table tab-ablation (bench)",
-          "loss_subsets", "miou", +1, 96.97 - 47.10, "96.97 vs 47.10 %", _ALL, _NONE),
-    Claim("loss_ds_mbiou", "adding L_ds to L_depth + L_tv raises mBIoU (boundary leakage)",
-          f"{_ABL} (loss decomposition) and Sec. Boundary-Aware Semantic Segmentation", "loss_subsets", "mbiou", +1,
-          None, "no number given", _ALL, {**_ALL, AX_LOSSES[2]: False}),
-    Claim("ordering_pose_random", "pose-nearest ordering raises adjacent mask IoU over random",
-          f"{_ABL}, Table tab-ordering (five 3D-OVS scenes)", "ordering", "ordering_adjacent_mask_iou_strict", +1,
-          53.21 - 33.92, "53.21 vs 33.92 %", {AX_ORDERING: "pose"}, {AX_ORDERING: "random"}),
-    Claim("ordering_pose_filename", "pose-nearest ordering raises adjacent mask IoU over filename order",
-          f"{_ABL}, Table tab-ordering (five 3D-OVS scenes)", "ordering", "ordering_adjacent_mask_iou_strict", +1,
-          53.21 - 50.85, "53.21 vs 50.85 %", {AX_ORDERING: "pose"}, {AX_ORDERING: "filename"}),
-    Claim("lambda_depth_r", "lambda_depth correlates negatively with mIoU",
-          f"{_ABL} (sensitivity), Fig. fig-lambda-sweep", "lambda_grid", "miou", -1, -0.89, "Pearson r",
-          correlation="axis.gaussiands.lambdas.depth"),
-    Claim("lambda_sem_r", "lambda_sem correlates positively with mIoU",
-          f"{_ABL} (sensitivity), Fig. fig-lambda-sweep", "lambda_grid", "miou", +1, 0.69, "Pearson r",
-          correlation="axis.gaussiands.lambdas.sem"),
-    Claim("latent_16_3", "mIoU rises from d = 3 to d = 16", f"{_ABL}, Table tab-dims (waldo_kitchen)",
-          "latent_dim", "miou", +1, 62.83 - 61.42, "62.83 vs 61.42 %",
-          {"method": "gaussiands", AX_LATENT: 16}, {"method": "gaussiands", AX_LATENT: 3}),
-    Claim("latent_32_16", "mIoU falls from d = 16 to d = 32", f"{_ABL}, Table tab-dims (waldo_kitchen)",
-          "latent_dim", "miou", -1, 61.32 - 62.83, "61.32 vs 62.83 %",
-          {"method": "gaussiands", AX_LATENT: 32}, {"method": "gaussiands", AX_LATENT: 16}),
-    Claim("noise_motion_blur", "motion blur on the depth prior lowers PSNR (the most of the four kinds)",
-          "Sec. Multi-view 3D Reconstruction (robustness), Fig. fig-noise", "depth_noise", "psnr", -1, None,
-          "figure only, no number", {AX_NOISE_TYPE: "motion_blur", AX_NOISE_SEVERITY: MAX},
-          {AX_NOISE_TYPE: None, AX_NOISE_SEVERITY: 0}),
-    *[Claim(f"noise_{kind}", f"PSNR is robust to {kind.replace('_', '-')} noise on the depth prior",
-            "Sec. Multi-view 3D Reconstruction (robustness), Fig. fig-noise", "depth_noise", "psnr", 0, None,
-            f"figure only: 'remarkably robust'; gsbench margin +-{ROBUST_MARGIN_DB} dB",
-            {AX_NOISE_TYPE: kind, AX_NOISE_SEVERITY: MAX}, {AX_NOISE_TYPE: None, AX_NOISE_SEVERITY: 0})
-      for kind in ("gaussian", "poisson", "salt_pepper")],
-]
-
-
 def verdict(direction: int, lo: float | None, hi: float | None, paper: float | None = None,
             margin: float = ROBUST_MARGIN_DB) -> str:
     """The verdict of one claim from the interval [lo, hi] of (row - reference), or of r; with the

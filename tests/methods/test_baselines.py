@@ -30,7 +30,7 @@ def test_paper_preset_uses_sh3_and_twostage_gets_the_same_semantic_budget():
     c = load_config("vanilla", "paper")
     assert c["train"]["sh_degree"] == 3 and c["train"]["sh_increase_every"] == 1000
     assert c["train"]["lr"]["color_rest_factor"] == pytest.approx(1 / 20)
-    from gsbench.methods.twostage import semantic_budget
+    from gsbench.methods.twostage_spec import semantic_budget
     t = load_config("twostage", "paper")
     assert semantic_budget(t) == t["train"]["iterations"] == 30000
 
@@ -47,7 +47,7 @@ def test_sh3_run_logs_bands_and_rest_lr(scene, tmp_path):
     assert ck["params"]["colors"].shape[1:] == (1, 3) and ck["params"]["colors_rest"].shape[1:] == (15, 3)
     assert float(ck["params"]["colors_rest"].abs().sum()) > 0      # bands 1..2 were trained
     s = read_json(run / "train_summary.json")
-    assert s["info"]["budget"] == {"rgb_steps": 12, "semantic_steps": 0}
+    assert s["info"]["budget"] == {"rgb_steps": 12, "semantic_steps": 0, "schedule": "none"}
     from gsbench.runs import load_run
     m, _, sc = load_run(run)
     assert m.field.sh_degree == 3 and m.device.type in ("cpu", "cuda")
@@ -56,10 +56,10 @@ def test_sh3_run_logs_bands_and_rest_lr(scene, tmp_path):
 def test_twostage_budget_and_gaussiands_loss_share(scene, tmp_path):
     t = train_run(load_config("twostage", "cpu-small", TINY), scene, tmp_path / "t", progress=False)
     st = read_json(t / "train_summary.json")["info"]["budget"]
-    assert st == {"rgb_steps": 12, "semantic_steps": 12}
+    assert st == {"rgb_steps": 12, "semantic_steps": 12, "schedule": "after rgb"}
     assert max(r["step"] for r in read_jsonl(t / "train_log.jsonl") if r["phase"] == "semantic") == 12
     g = train_run(load_config("gaussiands", "cpu-small", TINY), scene, tmp_path / "g", progress=False)
-    assert read_json(g / "train_summary.json")["info"]["budget"] == {"rgb_steps": 12, "semantic_steps": 12}
+    assert read_json(g / "train_summary.json")["info"]["budget"] == {"rgb_steps": 12, "semantic_steps": 12, "schedule": "joint"}
     for r in (r for r in read_jsonl(g / "train_log.jsonl") if "loss" in r):
         sh = r["loss_share"]
         assert set(sh) == {"rec", "depth", "tv", "sem", "ds"} and sum(sh.values()) == pytest.approx(1.0)

@@ -121,13 +121,13 @@ def test_grouping_trains_on_the_tiny_scene_and_evaluates(tiny_scene, tmp_path):
     evals = [r["eval"] for r in log if "eval" in r]
     assert evals and all("miou_3dovs" in e and "miou_lerf" in e for e in evals)
     info = read_json(run / "train_summary.json")["info"]
-    assert info["budget"] == {"rgb_steps": 6, "semantic_steps": 6}
+    assert info["budget"] == {"rgb_steps": 6, "semantic_steps": 6, "schedule": "joint"}
     assert info["num_classes"] == info["tracks"] + 1 >= 2      # cpu-small: num_classes null
     assert main(["eval", str(run)]) == 0
     res = read_json(run / "results.json")
     for k in ("psnr", "miou_3dovs", "mbiou_3dovs", "miou_lerf", "removal_residual"):
         assert res["metrics"][k] is not None, k
-    assert res["budget"] == {"rgb_steps": 6, "semantic_steps": 6}
+    assert res["budget"] == {"rgb_steps": 6, "semantic_steps": 6, "schedule": "joint"}
     # the saved model carries the trained classifier (the checkpoint's copy) and the track table
     from gsbench.methods.base import Method
     m = Method.load(run / "model.pt", device="cpu")

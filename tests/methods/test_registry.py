@@ -29,6 +29,10 @@ def _resolve_dummy(cfg: dict, scene, drop) -> None:
     drop("priors.depth", "method dummy-test needs no priors")
 
 
+def _budget_dummy(cfg: dict) -> dict:
+    return {"rgb_steps": int(cfg["train"]["iterations"]), "semantic_steps": 0, "schedule": "none"}
+
+
 def _uses_dummy(cfg: dict) -> dict:
     return {"depth_prior": False, "semantics": False}
 
@@ -37,7 +41,8 @@ def _uses_dummy(cfg: dict) -> dict:
 def dummy():
     spec = registry.register(registry.MethodSpec(
         name="dummy-test", target=f"{__name__}:DummyMethod", label="Dummy", section=None,
-        resolve=f"{__name__}:_resolve_dummy", uses=f"{__name__}:_uses_dummy"))
+        resolve=f"{__name__}:_resolve_dummy", uses=f"{__name__}:_uses_dummy",
+        budget=f"{__name__}:_budget_dummy"))
     yield spec
     registry.unregister("dummy-test")
 
@@ -99,14 +104,16 @@ def test_a_spec_names_its_code_as_strings():
     with pytest.raises(ValueError, match="resolve must be 'module:attribute'"):
         registry.register(registry.MethodSpec(name="callable-test", target=f"{__name__}:DummyMethod", label="x",
                                               section=None, resolve=_resolve_dummy,  # type: ignore[arg-type]
-                                              uses=f"{__name__}:_uses_dummy"))
+                                              uses=f"{__name__}:_uses_dummy",
+        budget=f"{__name__}:_budget_dummy"))
     assert "callable-test" not in registry.METHODS
 
 
 def test_a_class_whose_name_disagrees_is_refused():
     registry.register(registry.MethodSpec(name="other-name", target=f"{__name__}:DummyMethod", label="x",
                                           section=None, resolve=f"{__name__}:_resolve_dummy",
-                                          uses=f"{__name__}:_uses_dummy"))
+                                          uses=f"{__name__}:_uses_dummy",
+        budget=f"{__name__}:_budget_dummy"))
     try:
         with pytest.raises(TypeError, match="registered as 'other-name'"):
             registry.get_method("other-name")
@@ -203,3 +210,54 @@ def test_the_grid_entry_is_a_cache_hit_for_fit(tiny_scene, tmp_path):
     assert set(again.cache) == {"depth", "masks", "mask-stats", "features"}
     assert all(v["hit"] for v in again.cache.values())
     assert {k: v["key"] for k, v in again.cache.items()} == {k: v["key"] for k, v in first.cache.items()}
+
+
+class _FakeEntryPoint:
+    """What importlib.metadata gives for one entry point of the gsbench.methods group."""
+
+    def __init__(self, name: str, value: str, load):
+        self.name, self.value, self._load = name, value, load
+        self.dist = type("Dist", (), {"name": "fake-dist"})()
+
+    def load(self):
+        return self._load()
+
+
+@pytest.fixture
+def fresh_table(monkeypatch):
+    """The method table emptied, to be loaded again with the entry points a test gives."""
+    from gsbench import method_table as mt
+    monkeypatch.setattr(mt, "_REGISTRY", {})
+    monkeypatch.setattr(mt, "_LOADED", False)
+    return mt
+
+
+def test_an_entry_point_registers_a_method_after_the_builtins(fresh_table, monkeypatch):
+    spec = registry.MethodSpec(name="ep-test", target=f"{__name__}:DummyMethod", label="EP", section="ep_test",
+                               resolve=f"{__name__}:_resolve_dummy", uses=f"{__name__}:_uses_dummy",
+                               budget=f"{__name__}:_budget_dummy", defaults={"alpha": 1.5})
+    eps = [_FakeEntryPoint("ep-test", "pkg.spec:SPEC", lambda: spec)]
+    monkeypatch.setattr(fresh_table, "entry_points", lambda group: eps if group == "gsbench.methods" else [])
+    assert list(fresh_table.METHODS) == ["vanilla", "twostage", "grouping", "gaussiands", "ep-test"]
+    assert fresh_table.section_defaults() == {"ep_test": {"alpha": 1.5}}
+    cfg = load_config("ep-test", None, ["ep_test.alpha=2.5"])        # its own section is a checked key
+    assert cfg["ep_test"]["alpha"] == 2.5
+    with pytest.raises(InputError, match="ep_test.alpah"):
+        load_config("ep-test", None, ["ep_test.alpah=1"])
+
+
+def test_a_broken_entry_point_is_one_error_naming_it(fresh_table, monkeypatch):
+    def boom():
+        raise ModuleNotFoundError("No module named 'pkg'")
+    eps = [_FakeEntryPoint("broken", "pkg.spec:SPEC", boom)]
+    monkeypatch.setattr(fresh_table, "entry_points", lambda group: eps)
+    with pytest.raises(InputError, match=r"entry point 'broken' = 'pkg.spec:SPEC' of distribution fake-dist.*"
+                                         r"cannot be loaded: ModuleNotFoundError"):
+        list(fresh_table.METHODS)
+
+
+def test_an_entry_point_naming_something_else_is_refused(fresh_table, monkeypatch):
+    eps = [_FakeEntryPoint("odd", "pkg.spec:SPEC", lambda: {"name": "odd"})]
+    monkeypatch.setattr(fresh_table, "entry_points", lambda group: eps)
+    with pytest.raises(InputError, match="names dict, not a gsbench MethodSpec"):
+        list(fresh_table.METHODS)

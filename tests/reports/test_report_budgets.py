@@ -9,17 +9,23 @@ from PIL import Image
 from report_runs import write_run
 
 from gsbench.collect import collect
+from gsbench.config import load_config
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.data import Results
 from gsbench.reports.shares import mean_shares, read_shares
 
 
+def _config(method: str, *sets: str) -> dict:
+    """A whole resolved-looking config, as a run's results.json records it (the budget rules read it)."""
+    return load_config(method, None, ["train.iterations=500", *sets])
+
+
 def _budget_runs(root: Path) -> None:
-    write_run(root, "v", method="vanilla", scene="s", config_extra={"train": {"iterations": 500}})
+    write_run(root, "v", method="vanilla", scene="s", config_extra=_config("vanilla"))
     write_run(root, "t", method="twostage", scene="s",
-              config_extra={"train": {"iterations": 500}, "twostage": {"semantic_iterations": 150}})
-    g = write_run(root, "g", method="gaussiands", scene="s", config_extra={"train": {"iterations": 500}})
-    g2 = write_run(root, "g2", method="gaussiands", scene="s", seed=1, config_extra={"train": {"iterations": 500}})
+              config_extra=_config("twostage", "twostage.semantic_iterations=150"))
+    g = write_run(root, "g", method="gaussiands", scene="s", config_extra=_config("gaussiands"))
+    g2 = write_run(root, "g2", method="gaussiands", scene="s", seed=1, config_extra=_config("gaussiands"))
     for run in (g2,):  # a results budget wins over the config
         res = json.loads((run / "results.json").read_text())
         res["budget"] = {"iterations": 400, "semantic_iterations": 300}
@@ -99,10 +105,8 @@ def test_report_prints_requested_tables(tmp_path: Path, capsys):
 def test_budget_reads_the_methods_record_and_null_semantic_iterations(tmp_path: Path):
     """results.json `budget` as the methods record it ({rgb_steps, semantic_steps}) wins over the config;
     a twostage config with semantic_iterations null means train.iterations semantic steps."""
-    t = write_run(tmp_path, "t", method="twostage", scene="s",
-                  config_extra={"train": {"iterations": 500}, "twostage": {"semantic_iterations": None}})
-    t2 = write_run(tmp_path, "t2", method="twostage", scene="s", seed=1,
-                   config_extra={"train": {"iterations": 500}, "twostage": {"semantic_iterations": None}})
+    t = write_run(tmp_path, "t", method="twostage", scene="s", config_extra=_config("twostage"))
+    t2 = write_run(tmp_path, "t2", method="twostage", scene="s", seed=1, config_extra=_config("twostage"))
     res = json.loads((t2 / "results.json").read_text())
     res["budget"] = {"rgb_steps": 300, "semantic_steps": 200}
     (t2 / "results.json").write_text(json.dumps(res))

@@ -1,0 +1,149 @@
+"""GaussianDS: joint optimisation from scratch of appearance, scale-shift-aligned depth and compact
+semantic latents (paper Sec. III-IV; the choices made where the paper is silent: docs/methods.md).
+
+    L = L_rec + 0.01 L_depth + 1.5 L_tv + 5.0 L_sem + 1.0 L_ds      (config gaussiands.lambdas)
+
+L_depth and L_tv see the rendered depth divided by its own (detached) alpha-weighted mean
+(losses.normalised_depth), so both are scale-free and the lambdas weigh them alike on every scene.
+
+Inputs come from gsbench.priors: pose-aware pseudo-video order (priors.ordering), propagated masks,
+512-d mask features (compressed by the frozen autoencoder to d = gaussiands.latent_dim) and the depth
+prior. Terms the resolved config switched off (gaussiands.losses.*) are neither computed nor fed.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from gsbench.methods.base import Method, load_views, scene_init
+from gsbench.methods.common import fit_priors, run_trainer, uses
+
+from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, expected_depth, normalised_depth,  # isort: skip
+                                    reconstruction_loss, sem_loss, tv_loss)
+from gsbench.methods.gaussiands.spec import budget
+from gsbench.methods.residency import data_on, place
+from gsbench.methods.semantic import semantic_targets
+from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
+
+
+class GaussianDS(Method):
+    name = "gaussiands"
+
+    def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
+        run_dir = Path(run_dir)
+        dev = self._prepare(config)
+        g = config["gaussiands"]
+        use = uses(config)
+        # priors first: their working set (every image at the training size, flows) is freed before the
+        # training images are loaded, so the peak is the larger of the two, not their sum
+        pri = fit_priors(scene, config, run_dir, progress=progress)
+        views, (W, H) = load_views(scene, config, device=dev)
+        train_ids = sorted(views.cameras)
+        self.providers = dict(pri.providers)
+        self.info["priors_stats"] = dict(pri.stats)
+        self.info["priors_skipped"] = dict(pri.skipped)
+
+        ckpt = load_checkpoint_if_any(run_dir)
+        # ---- semantics: autoencoder (trained once, frozen; restored on resume) and per-pixel targets
+        targets = None
+        d = int(g["latent_dim"]) if use["semantics"] else 0
+        if use["semantics"]:
+            if pri.masks is None or pri.mask_features is None:
+                raise ValueError(f"gaussiands: semantic losses are on but the priors gave no masks/features "
+                                 f"({pri.skipped})")
+            ae_state = (ckpt or {}).get("extra", {}).get("autoencoder")
+            self.autoencoder, self.info["autoencoder"], targets = semantic_targets(
+                pri.masks, pri.mask_features, g["autoencoder"], d, int(config["seed"]), ae_state,
+                {v: (W, H) for v in train_ids}, dev, data_on(config))
+        # ---- depth prior and its edges E_d (invariant to the per-iteration affine alignment, see losses.py)
+        depth = pri.depth if use["depth_prior"] else None
+        edges = {}
+        if use["depth_prior"] and depth is None:
+            raise ValueError(f"gaussiands: depth terms are on but the priors gave no depth ({pri.skipped})")
+        if g["losses"]["ds"] and depth is not None:
+            e = g["edges"]
+            for v in train_ids:
+                edges[v] = torch.as_tensor(depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"],
+                                                       int(e["dilate"])))
+            self.info["edge_fraction"] = (float(np.mean([float(x.float().mean()) for x in edges.values()]))
+                                          if edges else 0.0)
+            edges = place(edges, dev, data_on(config))
+        # the depth prior on the device once (or on the host: train.data_on): values (float32), validity
+        # (finite and valid), its kind
+        dprior = {}
+        if depth is not None:
+            for v in train_ids:
+                vals = torch.as_tensor(np.asarray(depth[v].values, dtype=np.float32))
+                ok = torch.as_tensor(np.asarray(depth[v].valid, dtype=bool)) & torch.isfinite(vals)
+                dprior[v] = (torch.nan_to_num(vals, nan=0.0, posinf=0.0, neginf=0.0), ok, depth[v].kind)
+            dprior = place(dprior, dev, data_on(config))
+        has_any = {v: bool(targets.has_target[v].any()) for v in train_ids} if targets is not None else {}
+        # the host copies of the priors are no longer needed: the targets, dprior and edges hold what training
+        # reads (at 1440x1080 the masks and depth maps of 175 views are about 2.5 GB)
+        del pri, depth
+
+        lam = g["lambdas"]
+        on = g["losses"]
+        lam_dssim = float(config["train"]["lambda_dssim"])
+        form = g["depth_formulation"]
+        min_valid = int(g["min_valid_pixels"])
+        tv_eps = float(g["tv_eps"])
+        ds_average = str(g.get("ds_average", "pixels"))
+
+        def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
+            # every value stays on the device: no host synchronisation per step (the trainer reads
+            # terms, weighted terms and skip counts at log steps only)
+            rec = reconstruction_loss(out.rgb, gt, lam_dssim)
+            total = rec
+            terms = {"rec": rec.detach()}
+            weighted = {"rec": rec.detach()}
+            skipped = {}
+            if (on["depth"] and dprior) or on["tv"]:
+                dn = normalised_depth(out.depth, out.alpha)     # scale-free: lambdas mean the same on every scene
+            if on["depth"] and dprior:
+                vals, valid, kind = dprior[vid]
+                # the prior is compared with the depth of the covered part (D / alpha), never with D:
+                # 1 / D confounds coverage with depth (losses.expected_depth)
+                dt = depth_loss(form, expected_depth(dn, out.alpha), vals, valid, kind, min_valid)
+                if dt.loss is not None:
+                    w = float(lam["depth"]) * dt.loss
+                    total = total + w
+                    terms["depth"], weighted["depth"] = dt.loss.detach(), w.detach()
+                    skipped["depth"] = (~dt.ok).long()
+            if on["tv"]:
+                tv = tv_loss(dn, tv_eps)
+                w = float(lam["tv"]) * tv
+                total = total + w
+                terms["tv"], weighted["tv"] = tv.detach(), w.detach()
+            if targets is not None and out.features is not None:
+                S, has = targets.latents[vid], targets.has_target[vid]
+                if on["sem"]:
+                    if not has_any[vid]:
+                        skipped["sem"] = 1
+                    else:
+                        ls = sem_loss(out.features, S, has)
+                        w = float(lam["sem"]) * ls
+                        total = total + w
+                        terms["sem"], weighted["sem"] = ls.detach(), w.detach()
+                if on["ds"] and vid in edges:
+                    if not has_any[vid]:
+                        skipped["ds"] = 1
+                    else:
+                        ld = ds_loss(out.features, S, has, edges[vid], ds_average)
+                        w = float(lam["ds"]) * ld
+                        total = total + w
+                        terms["ds"], weighted["ds"] = ld.detach(), w.detach()
+            terms["total"] = total.detach()
+            return LossResult(total, terms, skipped, weighted)
+
+        extra = (lambda: {"autoencoder": self.autoencoder.state_dict()}) if self.autoencoder is not None else None
+        field0, how = scene_init(scene, config, d)
+        self.info["init"] = how
+        self.field = run_trainer(config, views, scene, field0, run_dir, loss_fn, phase="main",
+                                 backend=self._backend, progress=progress, resume=ckpt, extra_state=extra,
+                                 method=self)
+        self.info["n_gaussians"] = self.field.num
+        self.info["device"] = str(dev)
+        self.info["budget"] = budget(config)   # one joint phase: every step is appearance and semantics
