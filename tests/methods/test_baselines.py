@@ -59,7 +59,8 @@ def test_twostage_budget_and_gaussiands_loss_share(scene, tmp_path):
     assert st == {"rgb_steps": 12, "semantic_steps": 12, "schedule": "after rgb"}
     assert max(r["step"] for r in read_jsonl(t / "train_log.jsonl") if r["phase"] == "semantic") == 12
     g = train_run(load_config("gaussiands", "cpu-small", TINY), scene, tmp_path / "g", progress=False)
-    assert read_json(g / "train_summary.json")["info"]["budget"] == {"rgb_steps": 12, "semantic_steps": 12, "schedule": "joint"}
+    joint = {"rgb_steps": 12, "semantic_steps": 12, "schedule": "joint"}
+    assert read_json(g / "train_summary.json")["info"]["budget"] == joint
     for r in (r for r in read_jsonl(g / "train_log.jsonl") if "loss" in r):
         sh = r["loss_share"]
         assert set(sh) == {"rec", "depth", "tv", "sem", "ds"} and sum(sh.values()) == pytest.approx(1.0)

@@ -1,0 +1,53 @@
+"""The runs behind tests/data/loop_golden.json: every built-in method trained and evaluated on the tiny
+scene with periodic evaluation, densification and checkpoints, so a change of who owns the training
+loop can be checked against what the code before it computed.
+
+    .venv/bin/python tests/support/loop_golden.py tests/data/loop_golden.json   # writes the file
+
+tests/runs/test_loop_golden.py runs the same and compares. The file was written by the commit before
+the harness took over the loop (the methods' own fit() loops).
+"""
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+from tiny import TINY_SCENE_ARGS, TINY_SET
+
+from gsbench.cli import main
+from gsbench.config import load_config
+from gsbench.evaluation import evaluate_run
+from gsbench.runs import train_run
+from gsbench.store import read_jsonl
+
+METHODS = ("vanilla", "twostage", "grouping", "gaussiands")
+SET = [*TINY_SET, "train.eval_every=10", "train.eval_views=2", "train.checkpoint_every=10",
+       "twostage.semantic_iterations=10"]
+
+
+def _numbers(d: dict) -> dict:
+    return {k: v for k, v in d.items() if isinstance(v, (int, float)) and not isinstance(v, bool) or v is None}
+
+
+def golden_runs(work: Path) -> dict:
+    """{method: {"metrics": results.json metrics, "log": train_log.jsonl lines without wall times}}."""
+    scene = work / "scene"
+    assert main(["make-scene", *TINY_SCENE_ARGS, "--out", str(scene), "--quiet"]) == 0
+    out = {}
+    for m in METHODS:
+        run = train_run(load_config(m, "cpu-small", SET), scene, work / m, progress=False)
+        res = evaluate_run(run, progress=False)
+        log = [{k: v for k, v in r.items() if k != "wall_s"} for r in read_jsonl(run / "train_log.jsonl")]
+        metrics = {k: v for k, v in _numbers(res["metrics"]).items() if not k.startswith("fps")}
+        out[m] = {"metrics": metrics, "log": log}
+    return out
+
+
+if __name__ == "__main__":
+    with tempfile.TemporaryDirectory() as d:
+        data = golden_runs(Path(d))
+    Path(sys.argv[1]).write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
+    counts = ", ".join(f"{m}: {len(v['metrics'])} metrics, {len(v['log'])} log lines" for m, v in data.items())
+    print(f"wrote {sys.argv[1]}: {counts}")
