@@ -25,12 +25,12 @@ from gsbench.config import run_id
 from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError, NonFiniteError
-from gsbench.evaluation import segmentation_metrics
 from gsbench.methods.base import Method
 from gsbench.methods.device import resolve_device
 from gsbench.methods.registry import get_method, resolve_for_scene
 from gsbench.runlock import RunLock
 from gsbench.store import read_json, read_jsonl, write_json_atomic
+from gsbench.training import train_method
 
 log = logging.getLogger(__name__)
 MODEL = "model.pt"
@@ -111,11 +111,10 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
     prev_s = float((st or {}).get("train_s_so_far") or 0.0)
     _status(run_dir, "running", "", train_s_so_far=prev_s)
     method = get_method(cfg["method"])()
-    method.segmentation_scorer = segmentation_metrics   # periodic mIoU: the harness hands evaluation's scorer in
     t0 = time.perf_counter()
     memory = PeakMemory(_device(cfg)).start()
     try:
-        method.fit(scene, run_dir, cfg, progress=progress)
+        train_method(method, scene, run_dir, cfg, progress=progress)
     except NonFiniteError as e:
         _finish(run_dir, method, cfg, "nonfinite", str(e), prev_s + time.perf_counter() - t0, memory.read())
         raise

@@ -1,10 +1,13 @@
-"""The Method protocol (NerfBaselines-like: fit / render / save / load) and the shared implementation.
+"""The Method protocol (NerfBaselines-like: train phases / render / save / load) and the shared
+implementation.
 
 Every method in gsbench is a Gaussian field plus, for semantic methods, a frozen feature autoencoder
-and the id of the feature provider that embeds text:
+and the id of the feature provider that embeds text. The harness owns the training loop
+(gsbench/training.py); a method prepares its data and yields its optimisation phases:
 
     m = get_method("gaussiands")()
-    m.fit(scene, run_dir, config)             # writes train_log.jsonl and checkpoint.pt into run_dir
+    gsbench.training.train_method(m, scene, run_dir, config)   # runs m.train_phases(...), writes the log
+                                                                # and checkpoints into run_dir
     m.save(run_dir / "model.pt"); m = Method.load(run_dir / "model.pt")
     m.render(camera)                          # RenderOutput; .features = rendered latent S_hat (or None)
     m.semantic_features(camera, "encode")     # (H, W, d) S_hat           | "decode": (H, W, 512) decoded
@@ -19,7 +22,7 @@ from __future__ import annotations
 import copy
 import logging
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Generator, Optional
 
 import numpy as np
 import torch
@@ -33,13 +36,15 @@ from gsbench.methods.common import resolve_render_backend
 from gsbench.methods.device import prepare_backend, resolve_backend_for, resolve_device
 from gsbench.methods.registry import get_method
 from gsbench.methods.residency import DEVICE, data_on, place
-from gsbench.methods.trainer import TrainViews, init_field
+from gsbench.methods.trainer import Trainer, TrainViews, init_field
 from gsbench.priors import get_feature_provider
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera, training_size
 from gsbench.store import load_torch, save_torch_atomic
 
 QUERY_MODES = ("encode", "decode")
+# what train_phases returns: yields each phase's Trainer, receives that phase's final field
+Phases = Generator[Trainer, GaussianField, None]
 MODEL_FILE = "model.pt"
 DECODE_CHUNK = 1 << 18   # pixels decoded at once (images up to 512 x 512 in one piece)
 
@@ -69,12 +74,15 @@ class Method:
         self._feature_provider = None
         self._background_cache: dict = {}
         self.info: dict = {}
-        # set by the harness (gsbench.runs.train_run) to gsbench.evaluation's segmentation_metrics, for
-        # the periodic mIoU while training: the methods floor does not import evaluation (docs/architecture.md)
-        self.segmentation_scorer: Optional[Callable] = None
 
     # ------------------------------------------------------------------ protocol
-    def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:  # pragma: no cover
+    def train_phases(self, scene, run_dir: Path, config: dict, resume: Optional[dict] = None,
+                     progress: bool = True) -> "Phases":  # pragma: no cover
+        """Prepare (device, views, priors, initial field) and yield one optimisation phase at a time (a
+        `Trainer`: the shared 3DGS recipe with this method's loss); the harness runs each phase's steps
+        (`Trainer.train_iteration`) and sends its final field back. `resume` is the run's checkpoint
+        (or None): what the method restores itself from it (e.g. its autoencoder); the harness restores
+        the phase named in it. Set `self.field` (and `self.info`) before returning."""
         raise NotImplementedError
 
     def _prepare(self, config: dict) -> torch.device:

@@ -35,12 +35,12 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import SH_C0
-from gsbench.methods.base import Method, _check_mode, _unit, load_views, scene_init
-from gsbench.methods.common import fit_priors, semantic_eval, uses
+from gsbench.methods.base import Method, Phases, _check_mode, _unit, load_views, scene_init
+from gsbench.methods.common import fit_priors, uses
 from gsbench.methods.grouping_spec import budget
 from gsbench.methods.losses import reconstruction_loss
 from gsbench.methods.residency import data_on, place
-from gsbench.methods.trainer import LossResult, Trainer, load_checkpoint_if_any, periodic_eval
+from gsbench.methods.trainer import LossResult, Trainer
 
 log = logging.getLogger(__name__)
 NO_MASK = 0          # class of pixels outside every mask
@@ -202,7 +202,8 @@ class GaussianGrouping(Method):
         self.table = g["table"].to(device)
 
     # ------------------------------------------------------------------ training
-    def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
+    def train_phases(self, scene, run_dir: Path, config: dict, resume: Optional[dict] = None,
+                     progress: bool = True) -> Phases:
         run_dir = Path(run_dir)
         dev = self._prepare(config)
         g = config["grouping"]
@@ -210,7 +211,7 @@ class GaussianGrouping(Method):
         semantic = bool(uses(config)["semantics"])
         views, (W, H) = load_views(scene, config, device=dev)
         train_ids = sorted(views.cameras)
-        ckpt = load_checkpoint_if_any(run_dir)
+        ckpt = resume
         dim = int(g["identity_dim"]) if semantic else 0
         C = 0
         targets: Mapping[int, torch.Tensor] = {}
@@ -292,9 +293,7 @@ class GaussianGrouping(Method):
         tr = Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase="main",
                      backend=self._backend, seed=seed, extra_state=extra_state, device=dev, extra_optimizer=opt)
         holder["trainer"] = tr
-        tr.eval_fn = periodic_eval(views, self._backend, tr.background,
-                                   extra=semantic_eval(self if semantic else None, scene, views, config))
-        self.field = tr.run(progress=progress, resume_state=resumed)
+        self.field = yield tr
         if self.classifier is not None:
             self.classifier.eval()
         self.info["n_gaussians"] = self.field.num

@@ -1,4 +1,6 @@
-"""The shared 3DGS trainer used by every method (vanilla, twostage, gaussiands).
+"""The shared 3DGS optimisation of every method: one phase's state and its step (`Trainer`). The loop
+around the steps (schedule, logging, periodic evaluation, checkpoints, resume) is the harness's,
+gsbench/training.py.
 
 Recipe (3DGS, every number a config value under `train`): Adam with one group per tensor
 (position LR times the scene extent with exponential decay; colour, opacity, scaling, rotation,
@@ -7,11 +9,9 @@ split / prune, opacity reset), initialisation from the scene's sparse points or 
 in a cube around the cameras' centroid.
 
 The method supplies extra loss terms through `loss_fn(view_id, out, gt_rgb) -> LossResult`.
-Runs are seeded (view order, split sampling, init) and resumable: `checkpoint.pt` in the run folder
-holds parameters, Adam state, densification statistics, RNG states, step and elapsed time; on resume
-`train_log.jsonl` is cut back to the checkpoint's step so the log has no duplicated steps.
-A non-finite loss or parameter writes status "nonfinite" and raises NonFiniteError; the last good
-checkpoint is kept.
+Runs are seeded (view order, split sampling, init) and resumable: `Trainer.state()` (written by the
+harness to `checkpoint.pt`) holds parameters, Adam state, densification statistics, RNG states, step
+and elapsed time. A non-finite loss or parameter raises NonFiniteError; the last good checkpoint is kept.
 
 Device: the field, Adam state, densification statistics and background live on the device of the
 views' images (methods.device.resolve_device). A step does no host work: loss terms, skip counts
@@ -25,15 +25,12 @@ SH colours (N, K, 3) are trained as two Adam groups, the DC band (`train.lr.colo
 """
 from __future__ import annotations
 
-import json
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
@@ -41,7 +38,7 @@ from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, e
 from gsbench.phases import timed
 from gsbench.render import RenderOutput, render
 from gsbench.scene import Camera
-from gsbench.store import append_jsonl, load_torch, read_jsonl, save_torch_atomic, write_text_atomic
+from gsbench.store import load_torch, save_torch_atomic
 
 CHECKPOINT = "checkpoint.pt"
 TRAIN_LOG = "train_log.jsonl"
@@ -58,6 +55,16 @@ class LossResult:
     skipped: dict[str, torch.Tensor | int] = field(default_factory=dict)     # counted skips, e.g. {"depth": 1}
     weighted: dict[str, torch.Tensor | float] = field(default_factory=dict)  # lambda * term: logged as loss_share
     # Values may be device tensors: the trainer sums them on the device and reads them at log steps only.
+
+
+@dataclass
+class StepResult:
+    """What one step gives the harness's loop to log: the method's loss terms, densification info
+    (non-empty on a densify / prune / opacity-reset step) and the position learning rate."""
+
+    loss: LossResult
+    densify: dict
+    lr_position: float
 
 
 @dataclass
@@ -148,7 +155,6 @@ class Trainer:
                  loss_fn: Callable[[int, RenderOutput, torch.Tensor], LossResult], *, phase: str = "main",
                  iterations: Optional[int] = None, trainable: Optional[set[str]] = None, densify: bool = True,
                  backend: str = "torch", seed: int = 0, extra_state: Optional[Callable[[], dict]] = None,
-                 eval_fn: Optional[Callable[[GaussianField], dict]] = None,
                  device: Optional[torch.device] = None,
                  extra_optimizer: Optional[torch.optim.Optimizer] = None) -> None:
         self.cfg = cfg
@@ -163,7 +169,6 @@ class Trainer:
         self.backend = backend
         self.seed = int(seed)
         self.extra_state = extra_state
-        self.eval_fn = eval_fn
         # a method's own module trained with the field (e.g. grouping's identity classifier): stepped
         # right after the field's Adam, from the same backward pass; its state travels in extra_state
         self.extra_optimizer = extra_optimizer
@@ -190,6 +195,7 @@ class Trainer:
         self.torch_gen = torch.Generator(device=self.device).manual_seed(self.seed + 1)
         bg = self.tcfg.get("background") or [0.0, 0.0, 0.0]
         self.background = torch.tensor(bg, dtype=torch.float32, device=self.device)
+        self.bad_step = torch.zeros((), dtype=torch.long, device=self.device)   # first step with a non-finite loss
 
     # ------------------------------------------------------------------ state
     @property
@@ -263,7 +269,7 @@ class Trainer:
         return (f"the last good checkpoint is kept in {ck}" if ck.exists()
                 else "no checkpoint was written before this step")
 
-    def _check_finite(self, what: str, value: torch.Tensor | None = None) -> None:
+    def check_finite(self, what: str, value: torch.Tensor | None = None) -> None:
         if value is not None:
             if not bool(torch.isfinite(value).all()):
                 raise NonFiniteError(f"non-finite {what} at step {self.step} (phase {self.phase}); "
@@ -274,156 +280,74 @@ class Trainer:
                 raise NonFiniteError(f"non-finite parameter {k!r} at step {self.step} (phase {self.phase}); "
                                      f"{self._kept()}")
 
-    def _synchronize(self) -> None:
+    def synchronize(self) -> None:
         if self.device.type == "cuda":
             torch.cuda.synchronize(self.device)
 
-    def _raise_if_bad(self, bad_step: torch.Tensor) -> None:
+    def raise_if_bad(self) -> None:
         """Non-finite losses are flagged on the device each step and raised here (log, eval, checkpoint
         and densification steps), with the first bad step; no checkpoint is written after it."""
-        b = int(bad_step)
+        b = int(self.bad_step)
         if b > 0:
             raise NonFiniteError(f"non-finite loss at step {b} (phase {self.phase}); {self._kept()}")
 
-    # ------------------------------------------------------------------ loop
-    def run(self, progress: bool = True, resume_state: Optional[dict] = None) -> GaussianField:
-        log_path = self.run_dir / TRAIN_LOG
-        if resume_state is not None:
-            self.load_state(resume_state)
-            # drop log lines written after the checkpoint (they will be produced again)
-            lines = [r for r in read_jsonl(log_path)
-                     if r.get("phase") != self.phase or int(r.get("step", 0)) <= self.step]
-            write_text_atomic(log_path, "".join(json.dumps(r) + "\n" for r in lines))
+    def sh_degree(self) -> int:
+        """The SH degree the last step rendered with (one band more every `train.sh_increase_every`)."""
+        return sh_active_degree(self.step - 1, self.sh_max, self.sh_every)
+
+    # ------------------------------------------------------------------ one step
+    def train_iteration(self) -> StepResult:
+        """One optimisation step (the harness, gsbench.training, owns the loop around it): the next view,
+        render, the method's loss, backward, densification statistics, Adam, densify / prune and the
+        opacity reset on their schedule. Values stay on the device; a non-finite loss is flagged in
+        `bad_step` and raised by `raise_if_bad` at the loop's next synchronisation point."""
         d = self.tcfg["densify"]
-        log_every = max(1, int(self.tcfg["log_every"]))
-        eval_every = int(self.tcfg.get("eval_every") or 0)
-        ckpt_every = int(self.tcfg.get("checkpoint_every") or 0)
-        acc: dict = {}          # device tensors (or floats) summed per step, read at log steps only
-        acc_w: dict = {}
-        acc_n = 0
-        skipped: dict = {}
-        bad_step = torch.zeros((), dtype=torch.long, device=self.device)   # first step with a non-finite loss
-        bar = tqdm(total=self.iterations, initial=self.step, desc=f"train[{self.phase}]", disable=not progress,
-                   dynamic_ncols=True, leave=False)
-        while self.step < self.iterations:
-            t0 = time.perf_counter()
-            self.step += 1
-            lr_pos = self._update_lr()
-            vid = self._next_view()
-            cam = self.views.cameras[vid]
-            gt = self.views.images[vid]
-            fld = field_from_params(self.ps, sh_active_degree(self.step - 1, self.sh_max, self.sh_every))
-            out = render(fld, cam, backend=self.backend, background=self.background)
-            with timed("losses"):
-                res = self.loss_fn(vid, out, gt)
-            tot = res.total.detach()
-            bad_step = torch.where((bad_step == 0) & ~torch.isfinite(tot), torch.full_like(bad_step, self.step),
-                                   bad_step)
-            self.ps.optimizer.zero_grad(set_to_none=True)
-            if self.extra_optimizer is not None:
-                self.extra_optimizer.zero_grad(set_to_none=True)
-            with timed("backward"):
-                res.total.backward()
-            with torch.no_grad():
-                do_stats = self.densify and self.step < int(d["until_iter"])
-                if do_stats and out.radii is not None:
-                    with timed("densify"):
-                        self.stats.update(out.means2d.grad if out.means2d is not None else None, out.radii,
-                                          cam.width, cam.height)
-                try:
-                    with timed("optimiser"):
-                        self.ps.optimizer.step()
-                        if self.extra_optimizer is not None:
-                            self.extra_optimizer.step()
-                except RuntimeError as e:   # e.g. Adam's lr / (1 - beta1) overflows float32 (lr ~1e38)
-                    if "overflow" not in str(e):
-                        raise
-                    raise NonFiniteError(f"optimiser step overflowed at step {self.step} (phase {self.phase}): {e}; "
-                                         f"{self._kept()}") from None
-                info = {}
-                if self.densify and self.step < int(d["until_iter"]):
-                    if self.step > int(d["from_iter"]) and self.step % int(d["interval"]) == 0:
-                        self._raise_if_bad(bad_step)      # never densify from non-finite values
-                        reset_int = int(d["opacity_reset_interval"])
-                        with timed("densify"):
-                            info = densify_and_prune(self.ps, self.stats, d, self.extent,
-                                                     prune_big=self.step > reset_int, generator=self.torch_gen)
-                    if int(d["opacity_reset_interval"]) > 0 and self.step % int(d["opacity_reset_interval"]) == 0:
-                        with timed("densify"):
-                            reset_opacity(self.ps)
-                        info["opacity_reset"] = True
-            for k, v in res.terms.items():
-                acc[k] = acc.get(k, 0.0) + v
-            for k, v in res.weighted.items():
-                acc_w[k] = acc_w.get(k, 0.0) + v
-            acc_n += 1
-            for k, v in res.skipped.items():
-                skipped[k] = skipped.get(k, 0) + v
-            bar.update(1)
-            is_log = self.step % log_every == 0 or self.step == self.iterations or bool(info)
-            is_eval = (self.eval_fn is not None and eval_every > 0
-                       and (self.step % eval_every == 0 or self.step == self.iterations))
-            is_ckpt = ckpt_every > 0 and (self.step % ckpt_every == 0) and self.step < self.iterations
-            if is_log or is_eval or is_ckpt:
-                # the only host synchronisation of the loop: finiteness, timings and logged values
-                self._synchronize()
-                self._raise_if_bad(bad_step)
-                self._check_finite("parameters")
-            self.elapsed += time.perf_counter() - t0
-            if is_log:
-                loss = {k: float(v) / max(1, acc_n) for k, v in acc.items()}
-                rec = {"phase": self.phase, "step": self.step, "wall_s": round(self.elapsed, 4),
-                       "loss": loss, "n_gaussians": self.ps.num, "lr_position": lr_pos,
-                       "skipped": {k: int(v) for k, v in skipped.items()}}
-                if acc_w:
-                    w = {k: float(v) for k, v in acc_w.items()}
-                    tot_w = sum(w.values())
-                    rec["loss_share"] = {k: (v / tot_w if tot_w > 0 else 0.0) for k, v in w.items()}
-                if self.sh_max > 0:
-                    rec["sh_degree"] = sh_active_degree(self.step - 1, self.sh_max, self.sh_every)
-                if info:
-                    rec["densify"] = info
-                append_jsonl(log_path, rec)
-                if "total" in loss:
-                    bar.set_postfix(loss=f"{loss['total']:.4f}", n=self.ps.num)
-                acc, acc_w, acc_n, skipped = {}, {}, 0, {}
-            if is_eval:
-                ev = self.eval_fn(self.field)
-                append_jsonl(log_path, {"phase": self.phase, "step": self.step, "wall_s": round(self.elapsed, 4),
-                                        "eval": ev})
-            if is_ckpt:
-                self.save_checkpoint()
-        bar.close()
-        self._synchronize()
-        self._raise_if_bad(bad_step)
-        self._check_finite("parameters")
-        self.save_checkpoint()
-        return self.field
-
-
-def periodic_eval(views: TrainViews, backend: str, background: torch.Tensor,
-                  extra: Optional[Callable[[GaussianField], dict]] = None) -> Callable[[GaussianField], dict]:
-    """PSNR / SSIM (gsbench.metrics) on the held-out views listed in `views.eval_cameras`, plus what
-    `extra(field)` returns (e.g. the segmentation mIoU of a semantic method, see methods.common)."""
-
-    def _eval(fld: GaussianField) -> dict:
-        if not views.eval_cameras:
-            return {"skipped": "no test views"}
-        from gsbench.metrics import psnr, ssim
-        ps, ss = [], []
+        self.step += 1
+        lr_pos = self._update_lr()
+        vid = self._next_view()
+        cam = self.views.cameras[vid]
+        gt = self.views.images[vid]
+        fld = field_from_params(self.ps, sh_active_degree(self.step - 1, self.sh_max, self.sh_every))
+        out = render(fld, cam, backend=self.backend, background=self.background)
+        with timed("losses"):
+            res = self.loss_fn(vid, out, gt)
+        tot = res.total.detach()
+        self.bad_step = torch.where((self.bad_step == 0) & ~torch.isfinite(tot),
+                                    torch.full_like(self.bad_step, self.step), self.bad_step)
+        self.ps.optimizer.zero_grad(set_to_none=True)
+        if self.extra_optimizer is not None:
+            self.extra_optimizer.zero_grad(set_to_none=True)
+        with timed("backward"):
+            res.total.backward()
         with torch.no_grad():
-            for i, cam in views.eval_cameras.items():
-                out = render(fld, cam, backend=backend, background=background)
-                pred = out.rgb.clamp(0, 1).cpu().numpy()
-                gt = views.eval_images[i].cpu().numpy()
-                ps.append(psnr(pred, gt))
-                ss.append(ssim(pred, gt))
-        res = {"psnr": float(np.mean(ps)), "ssim": float(np.mean(ss)), "n_views": len(ps)}
-        if extra is not None:
-            res.update(extra(fld))
-        return res
-
-    return _eval
+            do_stats = self.densify and self.step < int(d["until_iter"])
+            if do_stats and out.radii is not None:
+                with timed("densify"):
+                    self.stats.update(out.means2d.grad if out.means2d is not None else None, out.radii,
+                                      cam.width, cam.height)
+            try:
+                with timed("optimiser"):
+                    self.ps.optimizer.step()
+                    if self.extra_optimizer is not None:
+                        self.extra_optimizer.step()
+            except RuntimeError as e:   # e.g. Adam's lr / (1 - beta1) overflows float32 (lr ~1e38)
+                if "overflow" not in str(e):
+                    raise
+                raise NonFiniteError(f"optimiser step overflowed at step {self.step} (phase {self.phase}): {e}; "
+                                     f"{self._kept()}") from None
+            info = {}
+            if self.densify and self.step < int(d["until_iter"]):
+                if self.step > int(d["from_iter"]) and self.step % int(d["interval"]) == 0:
+                    self.raise_if_bad()      # never densify from non-finite values
+                    reset_int = int(d["opacity_reset_interval"])
+                    with timed("densify"):
+                        info = densify_and_prune(self.ps, self.stats, d, self.extent,
+                                                 prune_big=self.step > reset_int, generator=self.torch_gen)
+                if int(d["opacity_reset_interval"]) > 0 and self.step % int(d["opacity_reset_interval"]) == 0:
+                    with timed("densify"):
+                        reset_opacity(self.ps)
+                    info["opacity_reset"] = True
+        return StepResult(res, info, lr_pos)
 
 
 def load_checkpoint_if_any(run_dir: Path) -> Optional[dict]:
@@ -431,5 +355,5 @@ def load_checkpoint_if_any(run_dir: Path) -> Optional[dict]:
     return load_torch(p) if p.exists() else None
 
 
-__all__ = ["Trainer", "TrainViews", "LossResult", "init_field", "periodic_eval", "load_checkpoint_if_any",
+__all__ = ["Trainer", "TrainViews", "LossResult", "StepResult", "init_field", "load_checkpoint_if_any",
            "CHECKPOINT", "TRAIN_LOG"]

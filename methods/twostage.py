@@ -9,15 +9,16 @@ own mask features only.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional
 
 import torch
 
-from gsbench.methods.base import Method, load_views, scene_init
-from gsbench.methods.common import fit_priors, run_trainer, uses
+from gsbench.methods.base import Method, Phases, load_views, scene_init
+from gsbench.methods.common import fit_priors, make_trainer, uses
 from gsbench.methods.losses import sem_loss
 from gsbench.methods.residency import data_on
 from gsbench.methods.semantic import semantic_targets
-from gsbench.methods.trainer import LossResult, field_from_params, load_checkpoint_if_any
+from gsbench.methods.trainer import LossResult, field_from_params
 from gsbench.methods.twostage_spec import budget, semantic_budget
 from gsbench.methods.vanilla import rgb_loss_fn
 
@@ -25,22 +26,23 @@ from gsbench.methods.vanilla import rgb_loss_fn
 class TwoStage(Method):
     name = "twostage"
 
-    def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
+    def train_phases(self, scene, run_dir: Path, config: dict, resume: Optional[dict] = None,
+                     progress: bool = True) -> Phases:
         run_dir = Path(run_dir)
+        ckpt = resume
         dev = self._prepare(config)
         views, (W, H) = load_views(scene, config, device=dev)
         sem_steps = semantic_budget(config)
         train_ids = sorted(views.cameras)
-        ckpt = load_checkpoint_if_any(run_dir)
         # ---- stage 1: RGB
         field0, how = scene_init(scene, config, 0)
         self.info["init"] = how
         if ckpt is not None and ckpt.get("phase") == "semantic":
             rgb_field = None                      # stage 1 finished before the interruption
         else:
-            rgb_field = run_trainer(config, views, scene, field0, run_dir,
-                                    rgb_loss_fn(float(config["train"]["lambda_dssim"])),
-                                    phase="rgb", backend=self._backend, progress=progress, resume=ckpt)
+            rgb_field = yield make_trainer(config, views, scene, field0, run_dir,
+                                           rgb_loss_fn(float(config["train"]["lambda_dssim"])),
+                                           phase="rgb", backend=self._backend)
         self.info["device"] = str(dev)
         self.info["budget"] = budget(config)
         if not uses(config)["semantics"]:
@@ -73,11 +75,8 @@ class TwoStage(Method):
             v = ls.detach()
             return LossResult(ls, {"sem": v, "total": v}, weighted={"sem": v})
 
-        self.field = run_trainer(config, views, scene, sem_field0, run_dir, loss_fn, phase="semantic",
-                                 backend=self._backend, progress=progress,
-                                 resume=ckpt if (ckpt or {}).get("phase") == "semantic" else None,
-                                 iterations=sem_steps,
-                                 trainable={"features"}, densify=False,
-                                 extra_state=lambda: {"autoencoder": self.autoencoder.state_dict()},
-                                 method=self)
+        self.field = yield make_trainer(config, views, scene, sem_field0, run_dir, loss_fn, phase="semantic",
+                                        backend=self._backend, iterations=sem_steps, trainable={"features"},
+                                        densify=False,
+                                        extra_state=lambda: {"autoencoder": self.autoencoder.state_dict()})
         self.info["n_gaussians"] = self.field.num

@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional
 
 import torch
 
-from gsbench.methods.base import Method, load_views, scene_init
-from gsbench.methods.common import run_trainer
+from gsbench.methods.base import Method, Phases, load_views, scene_init
+from gsbench.methods.common import make_trainer
 from gsbench.methods.losses import reconstruction_loss
-from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
+from gsbench.methods.trainer import LossResult
 from gsbench.methods.vanilla_spec import budget
 
 
@@ -23,16 +24,15 @@ def rgb_loss_fn(lam_dssim: float):
 class Vanilla(Method):
     name = "vanilla"
 
-    def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
-        run_dir = Path(run_dir)
+    def train_phases(self, scene, run_dir: Path, config: dict, resume: Optional[dict] = None,
+                     progress: bool = True) -> Phases:
         dev = self._prepare(config)
         views, _ = load_views(scene, config, device=dev)
         field0, how = scene_init(scene, config, 0)
         self.info["init"] = how
-        self.field = run_trainer(config, views, scene, field0, run_dir,
-                                 rgb_loss_fn(float(config["train"]["lambda_dssim"])),
-                                 phase="main", backend=self._backend, progress=progress,
-                                 resume=load_checkpoint_if_any(run_dir))
+        self.field = yield make_trainer(config, views, scene, field0, Path(run_dir),
+                                        rgb_loss_fn(float(config["train"]["lambda_dssim"])),
+                                        phase="main", backend=self._backend)
         self.info["n_gaussians"] = self.field.num
         self.info["device"] = str(dev)
         self.info["budget"] = budget(config)

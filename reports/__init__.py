@@ -11,8 +11,8 @@ from typing import Any
 __all__ = ["build_report", "ReportSummary"]
 
 
-def __getattr__(name: str) -> Any:  # lazy: importing the package must not import matplotlib
+def __getattr__(name: str) -> Any:
     if name in ("build_report", "ReportSummary"):
-        from gsbench.reports import build
+        from gsbench.reports import build  # lazy: importing the package must not import matplotlib
         return getattr(build, name)
     raise AttributeError(name)

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from gsbench.method_table import METHODS, get_spec
+
 
 @dataclass(frozen=True)
 class MetricSpec:
@@ -128,8 +130,7 @@ REFERENCE_TEXT = {
 
 
 def method_label(method: str) -> str:
-    """The registered method's report label (gsbench.methods.registry); an unknown name as it is."""
-    from gsbench.methods.registry import METHODS, get_spec
+    """The registered method's report label (gsbench.method_table); an unknown name as it is."""
     return get_spec(method).label if method in METHODS else str(method)
 
 

@@ -16,6 +16,7 @@ from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, 
 from gsbench.reports.spec import (AX_FORMULATION, AX_NOISE_TYPE, AX_ORDERING, FORMULATION_LABELS,  # isort: skip
                                   FORMULATION_ORDER, NOISE_LABELS, NOISE_ORDER, ORDERING_LABELS, ORDERING_ORDER,
                                   PROTOCOL_LABELS, MetricSpec, method_label, metric_spec)
+from gsbench.method_table import method_sort_key
 from gsbench.reports.table import Cell, Column, Row, Table, _tex
 
 PROTOCOL_ORDER = ["3dovs", "lerf", None]
@@ -29,7 +30,6 @@ def _protocol_rank(p: Any) -> int:
 
 
 def ordered_methods(methods: list) -> list:
-    from gsbench.methods.registry import method_sort_key
     return sorted(methods, key=method_sort_key)
 
 

@@ -13,25 +13,27 @@ prior. Terms the resolved config switched off (gaussiands.losses.*) are neither 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import torch
 
-from gsbench.methods.base import Method, load_views, scene_init
-from gsbench.methods.common import fit_priors, run_trainer, uses
+from gsbench.methods.base import Method, Phases, load_views, scene_init
+from gsbench.methods.common import fit_priors, make_trainer, uses
 
 from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, expected_depth, normalised_depth,  # isort: skip
                                     reconstruction_loss, sem_loss, tv_loss)
 from gsbench.methods.gaussiands.spec import budget
 from gsbench.methods.residency import data_on, place
 from gsbench.methods.semantic import semantic_targets
-from gsbench.methods.trainer import LossResult, load_checkpoint_if_any
+from gsbench.methods.trainer import LossResult
 
 
 class GaussianDS(Method):
     name = "gaussiands"
 
-    def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
+    def train_phases(self, scene, run_dir: Path, config: dict, resume: Optional[dict] = None,
+                     progress: bool = True) -> Phases:
         run_dir = Path(run_dir)
         dev = self._prepare(config)
         g = config["gaussiands"]
@@ -45,7 +47,7 @@ class GaussianDS(Method):
         self.info["priors_stats"] = dict(pri.stats)
         self.info["priors_skipped"] = dict(pri.skipped)
 
-        ckpt = load_checkpoint_if_any(run_dir)
+        ckpt = resume
         # ---- semantics: autoencoder (trained once, frozen; restored on resume) and per-pixel targets
         targets = None
         d = int(g["latent_dim"]) if use["semantics"] else 0
@@ -141,9 +143,8 @@ class GaussianDS(Method):
         extra = (lambda: {"autoencoder": self.autoencoder.state_dict()}) if self.autoencoder is not None else None
         field0, how = scene_init(scene, config, d)
         self.info["init"] = how
-        self.field = run_trainer(config, views, scene, field0, run_dir, loss_fn, phase="main",
-                                 backend=self._backend, progress=progress, resume=ckpt, extra_state=extra,
-                                 method=self)
+        self.field = yield make_trainer(config, views, scene, field0, run_dir, loss_fn, phase="main",
+                                        backend=self._backend, extra_state=extra)
         self.info["n_gaussians"] = self.field.num
         self.info["device"] = str(dev)
         self.info["budget"] = budget(config)   # one joint phase: every step is appearance and semantics

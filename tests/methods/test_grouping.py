@@ -19,6 +19,7 @@ from gsbench.methods.grouping import (
     track_table,
 )
 from gsbench.store import load_torch, read_json, read_jsonl
+from gsbench.training import train_method
 
 
 def test_identity_loss_is_cross_entropy_over_log_classes():
@@ -161,7 +162,7 @@ def test_a_resumed_run_ends_where_a_straight_one_does(tiny_scene, tmp_path):
     def fit(run, iters):
         cfg, _ = resolve_for_scene(load_config("grouping", "cpu-small", base + [f"train.iterations={iters}"]), scene)
         m = GaussianGrouping()
-        m.fit(scene, run, cfg, progress=False)
+        train_method(m, scene, run, cfg, progress=False)
         return m
     run_a, run_b = tmp_path / "a", tmp_path / "b"
     run_a.mkdir()

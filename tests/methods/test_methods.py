@@ -209,34 +209,3 @@ def test_expon_lr_endpoints_and_midpoint():
     assert expon_lr(0, 1e-2, 1e-4, 100, delay_steps=10, delay_mult=0.01) == pytest.approx(1e-4)
 
 
-# ---------------------------------------------------------------------------- periodic mIoU scorer
-def _semantic_stub(scorer):
-    """A semantic method, scene and views reduced to what methods.common.semantic_eval reads."""
-    from types import SimpleNamespace
-    method = SimpleNamespace(autoencoder=object(), has_semantics=True, feature_provider=lambda: None,
-                             segmentation_scorer=scorer)
-    scene = SimpleNamespace(has_semantics=True, has_labels=False)
-    views = SimpleNamespace(eval_cameras={3: "cam3", 1: "cam1"})
-    field = SimpleNamespace(features=torch.zeros(2, 3))
-    return method, scene, views, field
-
-
-def test_periodic_miou_uses_the_scorer_the_harness_hands_in():
-    from gsbench.methods.common import semantic_eval
-    calls = []
-
-    def scorer(m, scene, ids, cams, config):
-        calls.append((m.field, ids, cams))
-        return {"miou_3dovs": 0.25, "miou_lerf": None}, {}
-
-    method, scene, views, field = _semantic_stub(scorer)
-    out = semantic_eval(method, scene, views, {"query": {"mode": "decode"}})(field)
-    assert out == {"miou_3dovs": 0.25, "query_mode": "decode"}
-    assert calls == [(field, [1, 3], ["cam1", "cam3"])]
-
-
-def test_periodic_miou_without_a_scorer_says_why():
-    from gsbench.methods.common import semantic_eval
-    method, scene, views, field = _semantic_stub(None)
-    out = semantic_eval(method, scene, views, {})(field)
-    assert list(out) == ["miou_skipped"] and "gsbench.runs.train_run" in out["miou_skipped"]

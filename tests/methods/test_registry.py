@@ -12,6 +12,7 @@ from gsbench.errors import InputError
 from gsbench.methods import registry
 from gsbench.methods.base import Method
 from gsbench.methods.registry import resolve_for_scene
+from gsbench.training import train_method
 
 
 class DummyMethod(Method):
@@ -19,7 +20,7 @@ class DummyMethod(Method):
 
     name = "dummy-test"
 
-    def fit(self, scene, run_dir: Path, config: dict, progress: bool = True) -> None:  # pragma: no cover
+    def train_phases(self, scene, run_dir: Path, config: dict, resume=None, progress: bool = True):  # pragma: no cover
         raise AssertionError("not trained in these tests")
 
 
@@ -166,7 +167,7 @@ def test_fit_asks_for_the_priors_the_grid_prepares(method, overrides, tiny_scene
     grid_req = registry.priors_request(cfg, tiny_scene.path)          # what a grid computes from the cell
     resolved, _ = resolve_for_scene(cfg, tiny_scene)                  # what gsbench train hands to fit()
     try:
-        registry.get_method(method)().fit(tiny_scene, tmp_path / "run", resolved, progress=False)
+        train_method(registry.get_method(method)(), tiny_scene, tmp_path / "run", resolved, progress=False)
     except _Stop:
         pass
     if grid_req is None:
