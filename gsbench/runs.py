@@ -55,7 +55,7 @@ def _fingerprint(scene_path) -> str:
 
 def _device(cfg: dict) -> str:
     """The device training uses, for the memory counters (methods.device.resolve_device). A config
-    it refuses gets "cpu" here: fit() raises the same error next and records it in status.json."""
+    it refuses gets "cpu" here: training raises the same error next and records it in status.json."""
     try:
         return str(resolve_device(cfg))
     except InputError:

@@ -27,7 +27,7 @@ def cache_dir_for(config: dict, run_dir: Path) -> Path:
 
 
 def fit_priors(scene, config: dict, run_dir: Path, *, progress: bool):
-    """The priors of fit(): computed from the registry's priors request, the same dict a grid builds
+    """The priors of a method's train_phases(): computed from the registry's priors request, the same dict a grid builds
     to share priors between cells, so the two cannot ask for different cache entries."""
     req = build_priors_request(config, scene)
     if req is None:

@@ -5,7 +5,7 @@ here). This module imports what a spec names: the Method class (only when the me
 listing methods stays cheap), its resolver (what to switch off when the scene cannot feed it, with
 reasons) and its `uses` rule. Everything that used to repeat this knowledge reads it from the table
 or from here: CLI choices, the config's `method` check, the per-scene resolver, the priors request
-that both `fit()` and a grid's shared-priors step build, and the report order (registration order).
+that both `train_phases()` and a grid's shared-priors step build, and the report order (registration order).
 """
 from __future__ import annotations
 
@@ -72,7 +72,7 @@ def priors_request(config: dict, scene) -> Optional[dict]:
     """What the method will ask gsbench.priors for, or None when it needs no priors.
 
     `config` may be resolved or not (it is resolved for `scene` here); `scene` is a loaded scene or
-    its folder. A grid groups cells by this dict; fit() computes its priors from the same dict
+    its folder. A grid groups cells by this dict; train_phases() computes its priors from the same dict
     (methods/common.py fit_priors), so equal requests hit the same cache entry.
     """
     req = build_priors_request(config, scene)
@@ -86,7 +86,7 @@ def build_priors_request(config: dict, scene) -> Optional[dict]:
     if isinstance(scene, (str, Path)):
         scene = load_scene(scene)
     cfg, _ = resolve_for_scene(config, scene)
-    train_ids, _ = split_ids(scene, cfg)   # the views fit() trains on (train.holdout)
+    train_ids, _ = split_ids(scene, cfg)   # the views the method trains on (train.holdout)
     if not train_ids:
         return None
     spec = get_spec(cfg["method"])

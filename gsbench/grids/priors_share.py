@@ -17,7 +17,7 @@ from gsbench.priors import prepare_priors
 
 def priors_request(spec: dict) -> Optional[dict]:
     """The priors entry the cell's method will ask for (the method registry builds the same request
-    that fit() uses), or None when it needs no priors. Cells with equal requests share one cache entry."""
+    that train_phases() uses), or None when it needs no priors. Cells with equal requests share one cache entry."""
     return method_priors_request(spec["config"], spec["scene_path"])
 
 
