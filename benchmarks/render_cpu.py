@@ -35,9 +35,9 @@ import gsbench  # noqa: F401  (before torch: gsbench's OpenMP default, the same 
 # isort: split
 import torch
 
+from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
 from gsbench.render import render
-from gsbench.scene import Camera
 
 DEFAULT_SCENES = "64x64/1000,128x128/10000,256x256/50000"
 

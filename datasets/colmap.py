@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
-from gsbench.scene import Camera
 
 # model name -> (fx, fy, cx, cy) parameter indices; the rest are distortion parameters
 _PINHOLE_LIKE = {

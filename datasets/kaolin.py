@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
-from gsbench.scene import Camera
 
 from .imageio import image_size
 from .nerf import read_json_input

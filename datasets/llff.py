@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
-from gsbench.scene import Camera
 
 from .imageio import read_npy, write_npy
 

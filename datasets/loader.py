@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
-from gsbench.scene import Camera
 
 from . import colmap as colmap_io
 from . import kaolin as kaolin_io

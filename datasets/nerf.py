@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
-from gsbench.scene import Camera
 from gsbench.store import read_json
 
 from .imageio import IMAGE_EXTS, image_size

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from gsbench.scene import Camera
+from gsbench.camera import Camera
 
 from .synthetic_spec import AMBIENT, FAR, LIGHTS, WALL_Y, Decal, Prim, SceneSpec
 

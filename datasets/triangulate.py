@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
-from gsbench.scene import Camera
 
 from .base import Scene
 from .colmap import write_colmap

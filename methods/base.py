@@ -27,6 +27,7 @@ from typing import Generator, Optional
 import numpy as np
 import torch
 
+from gsbench.camera import Camera, training_size
 from gsbench.datasets.imageio import resize_rgb
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
@@ -39,7 +40,6 @@ from gsbench.methods.residency import DEVICE, data_on, place
 from gsbench.methods.trainer import Trainer, TrainViews, init_field
 from gsbench.priors import get_feature_provider
 from gsbench.render import RenderOutput, render
-from gsbench.scene import Camera, training_size
 from gsbench.store import load_torch, save_torch_atomic
 
 QUERY_MODES = ("encode", "decode")

@@ -14,11 +14,11 @@ import importlib
 from pathlib import Path
 from typing import Any, Optional
 
+from gsbench.camera import training_size
 from gsbench.datasets import load_scene
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
 from gsbench.method_table import METHODS, MethodSpec, get_spec, method_sort_key, register, unregister
-from gsbench.scene import training_size
 
 
 def load_target(target: str) -> Any:

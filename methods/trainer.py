@@ -32,12 +32,12 @@ from typing import Callable, Optional
 import numpy as np
 import torch
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
 from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
 from gsbench.phases import timed
 from gsbench.render import RenderOutput, render
-from gsbench.scene import Camera
 from gsbench.store import load_torch, save_torch_atomic
 
 CHECKPOINT = "checkpoint.pt"

@@ -13,10 +13,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from gsbench.camera import training_size
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
 from gsbench.results import FRAME_SETS
-from gsbench.scene import training_size
 
 RESOLUTIONS = ("reference", "train")
 

@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from gsbench.scene import Camera
+from gsbench.camera import Camera
 
 ORDERINGS = ("pose", "random", "filename")
 

@@ -41,8 +41,8 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from tqdm.auto import tqdm
 
+from gsbench.camera import Camera
 from gsbench.priors import warp as W
-from gsbench.scene import Camera
 
 DEFAULT_MIN_IOU = 0.3
 MIN_TRACK_AREA_FRAC = 0.001

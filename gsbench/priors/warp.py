@@ -8,7 +8,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from gsbench.scene import Camera
+from gsbench.camera import Camera
 
 NEAR = 1e-6
 

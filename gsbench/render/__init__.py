@@ -23,11 +23,11 @@ from typing import Callable, Optional
 
 import torch
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.render.projection import Projected, project_gaussians
 from gsbench.render.torch_backend import rasterize_torch
-from gsbench.scene import Camera
 
 BACKENDS = ("torch", "cpu", "gsplat")
 

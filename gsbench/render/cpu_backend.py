@@ -53,13 +53,13 @@ import numba
 import numpy as np
 import torch
 
+from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
 from gsbench.phases import timed
 from gsbench.render import cpu_kernels as K
 from gsbench.render import cpu_projection as P
 from gsbench.render import rules
 from gsbench.render.projection import Projected, camera_tensors
-from gsbench.scene import Camera
 
 # Must precede the first parallel kernel launch. Set in the environment too: numba re-reads its
 # configuration from the environment whenever os.environ changes, which would undo a plain assignment.

@@ -29,10 +29,10 @@ from typing import Optional
 
 import torch
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.render import RenderOutput, rules  # gsbench.render imports this module only when rendering
-from gsbench.scene import Camera
 
 RENDER_MODE = "RGB+D"
 

@@ -9,9 +9,9 @@ from dataclasses import dataclass
 
 import torch
 
+from gsbench.camera import Camera
 from gsbench.gaussians import LOG_SCALE_MAX, LOG_SCALE_MIN, GaussianField, normalize_quats, quat_to_rotmat
 from gsbench.render import rules
-from gsbench.scene import Camera
 
 
 @dataclass

@@ -7,11 +7,11 @@ from typing import Iterable
 import numpy as np
 import torch
 
+from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
 from gsbench.render import render
 from gsbench.render.gsplat_ext import build_gsplat_extension, gsplat_status
 from gsbench.render.projection import project_gaussians
-from gsbench.scene import Camera
 from gsbench.stress.core import Case, CaseResult, _camera, _field, _grads, _result, _to_np, all_finite, compare
 
 

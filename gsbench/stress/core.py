@@ -12,7 +12,7 @@ from typing import Callable, Optional
 import numpy as np
 import torch
 
-from gsbench.scene import Camera
+from gsbench.camera import Camera
 
 
 @dataclass

@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
+from gsbench.camera import Camera
 from gsbench.config import load_config, parse_overrides, run_id
 from gsbench.datasets.base import Scene
 from gsbench.errors import InputError
 from gsbench.methods.registry import resolve_for_scene
-from gsbench.scene import Camera
 
 
 def test_defaults_carry_the_paper_weights():

@@ -30,7 +30,7 @@ FLOORS: dict[str, int] = {
     # 0 ground: types, files and settings every floor may use
     "gsbench": 0,                  # the package itself: process start-up settings
     "gsbench.errors": 0,
-    "gsbench.scene": 0,            # Camera and the training-size rule
+    "gsbench.camera": 0,           # Camera and the training-size rule
     "gsbench.gaussians": 0,
     "gsbench.store": 0,            # atomic file writes and reads
     "gsbench.results": 0,          # the results.json schema
@@ -191,7 +191,7 @@ def test_checker_sees_imports_in_functions_relative_and_import_module(tmp_path):
         "gsbench/render/__init__.py": "from .kern import k\n",
         "gsbench/render/kern.py": "k = 1\n",
         "methods/__init__.py": "",
-        "methods/base.py": "from . import other\nfrom gsbench.scene import Camera\n",
+        "methods/base.py": "from . import other\nfrom gsbench.camera import Camera\n",
         "methods/other.py": "",
         "reports/__init__.py": "",
         "reports/build.py": "",
@@ -201,7 +201,7 @@ def test_checker_sees_imports_in_functions_relative_and_import_module(tmp_path):
     assert ("gsbench.config", "gsbench.reports.build", True, "") in found
     assert ("gsbench.render", "gsbench.render.kern", False, "") in found
     assert ("gsbench.methods.base", "gsbench.methods.other", False, "") in found
-    # gsbench.scene is not a file of this tree: the import names the longest module that exists
+    # gsbench.camera is not a file of this tree: the import names the longest module that exists
     assert ("gsbench.methods.base", "gsbench", False, "") in found
     bad = {(i.source, t) for i, t in upward(imports(root))}
     assert bad == {("gsbench.config", "gsbench.methods.base"), ("gsbench.config", "gsbench.methods"),

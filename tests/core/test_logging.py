@@ -51,9 +51,9 @@ def test_importing_gsbench_flushed_denormals():
 def test_render_does_not_touch_process_state(backend, monkeypatch):
     import numpy as np
 
+    from gsbench.camera import Camera
     from gsbench.gaussians import GaussianField
     from gsbench.render import render
-    from gsbench.scene import Camera
     calls = []
     monkeypatch.setattr(torch, "set_flush_denormal", lambda on: calls.append(on) or True)
     K = np.array([[20.0, 0, 8], [0, 20.0, 6], [0, 0, 1]])

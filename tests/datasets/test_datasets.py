@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from paths import SHARED_DATA
 
+from gsbench.camera import Camera
 from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.datasets.colmap import write_colmap
 from gsbench.datasets.imageio import write_png
 from gsbench.datasets.llff import write_poses_bounds
 from gsbench.datasets.ovs import label_masks, mask_to_polygons, polygons_to_mask, read_lerf_label
 from gsbench.errors import InputError
-from gsbench.scene import Camera
 
 SHARED = SHARED_DATA
 KAOLIN = SHARED / "kaolin_clock"

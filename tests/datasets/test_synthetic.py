@@ -103,7 +103,7 @@ def _reprojection_median(s, i, j, cj=None):
 
 def test_reprojection_consistency(gen):
     """GT depth of view i, back-projected and moved into view j, matches view j's GT depth."""
-    from gsbench.scene import Camera
+    from gsbench.camera import Camera
 
     out, _ = gen
     s = load_scene(out)

@@ -3,11 +3,11 @@ frustum initialisation of forward-facing scenes, loss shares in the train log.""
 import numpy as np
 import pytest
 
+from gsbench.camera import Camera
 from gsbench.config import load_config
 from gsbench.methods.base import frustum_points
 from gsbench.methods.trainer import sh_active_degree
 from gsbench.runs import train_run
-from gsbench.scene import Camera
 from gsbench.store import load_torch, read_json, read_jsonl
 
 TINY = ["backend=cpu", "train.iterations=12", "train.max_width=32", "train.eval_every=0", "train.log_every=4",

@@ -85,7 +85,7 @@ def test_camera_device_tensors_are_cached_per_device_and_never_pickled():
 
     import numpy as np
 
-    from gsbench.scene import Camera
+    from gsbench.camera import Camera
     w2c = np.eye(4)
     w2c[:3, 3] = [0.5, -1.0, 2.0]
     cam = Camera(np.array([[50.0, 0, 16], [0, 50.0, 12], [0, 0, 1]]), w2c, 32, 24)

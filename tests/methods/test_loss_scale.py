@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 
+from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
 from gsbench.methods.losses import depth_loss, normalised_depth, solve_scale_shift, tv_loss
 from gsbench.render import render
-from gsbench.scene import Camera
 
 LAM = {"depth": 0.01, "tv": 1.5}
 

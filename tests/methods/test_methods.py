@@ -93,7 +93,7 @@ def test_method_remove_prunes_exactly_above_threshold():
 def test_methods_without_semantics_return_none():
     m = get_method("vanilla")()
     m.field = _field(5, features=None).with_features(None)
-    from gsbench.scene import Camera
+    from gsbench.camera import Camera
     cam = Camera(np.array([[20.0, 0, 8], [0, 20, 6], [0, 0, 1]]), np.eye(4), 16, 12)
     assert m.semantic_features(cam, "encode") is None and m.embed_text(["x"], "decode") is None
     with pytest.raises(ValueError):
@@ -104,9 +104,9 @@ def test_methods_without_semantics_return_none():
 
 def test_decoded_features_are_the_same_in_chunks(monkeypatch):
     """Decode mode decodes in row chunks (memory at full size); chunking must not change any pixel."""
+    from gsbench.camera import Camera
     from gsbench.methods import base as B
     from gsbench.render import RenderOutput
-    from gsbench.scene import Camera
     m = get_method("gaussiands")()
     m.field = _field(5)
     torch.manual_seed(0)

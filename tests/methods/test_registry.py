@@ -148,7 +148,7 @@ CONFIGS = [
 def test_fit_asks_for_the_priors_the_grid_prepares(method, overrides, tiny_scene, tmp_path, monkeypatch):
     """What fit() passes to prepare_priors is what the grid's request says (vanilla: nothing at all)."""
     import gsbench.methods.common as P  # where fit_priors looks prepare_priors up
-    from gsbench.scene import training_size
+    from gsbench.camera import training_size
     assert set(registry.METHODS) >= {"vanilla", "twostage", "gaussiands"}
     cache = tmp_path / "cache"
     cfg = load_config(method, "cpu-small", ["train.iterations=1", "train.eval_views=0", "backend=torch",

@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
 from gsbench.metrics import adjacent_mask_iou, adjacent_mask_iou_pairs, mean_adjacent_distance
-from gsbench.scene import Camera
 
 K = np.array([[10.0, 0, 8], [0, 10.0, 6], [0, 0, 1]])
 H, W = 12, 16

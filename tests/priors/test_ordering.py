@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from sphere_scene import make_sphere_scene
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
 from gsbench.priors import ordering as O
 from gsbench.priors import prepare_priors
-from gsbench.scene import Camera
 
 
 def cams_at(centers, names=None):

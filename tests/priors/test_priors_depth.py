@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 from sphere_scene import make_sphere_scene
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
 from gsbench.priors import depth as D
 from gsbench.priors import prepare_priors
 from gsbench.priors import warp as W
-from gsbench.scene import Camera
 
 
 def _affine_fit(x, y):

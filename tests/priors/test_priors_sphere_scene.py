@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 from sphere_scene import look_at, make_sphere_scene, raycast
 
-from gsbench.scene import Camera
+from gsbench.camera import Camera
 
 
 def test_raycast_depth_matches_hand_computed():

@@ -12,12 +12,12 @@ import pytest
 import torch
 from naive_render import naive_render
 
+from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
 from gsbench.render import render
 from gsbench.render.cpu_backend import rasterize_cpu
 from gsbench.render.projection import Projected, project_gaussians
 from gsbench.render.torch_backend import rasterize_torch
-from gsbench.scene import Camera
 
 PARAMS = ("means", "log_scales", "quats", "opacity_logits", "colors", "features")
 

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
+from gsbench.camera import Camera
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.render import render, resolve_backend
 from gsbench.render.gsplat_backend import gsplat_arguments, split_outputs
-from gsbench.scene import Camera
 
 HAVE_GSPLAT = importlib.util.find_spec("gsplat") is not None
 HAVE_CUDA = torch.cuda.is_available()

@@ -17,9 +17,9 @@ import torch
 from naive_render import naive_render, sh_basis, threshold_margins
 from render_fields import look_at, random_field, with_grad
 
+from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
 from gsbench.render import render, rules, torch_backend
-from gsbench.scene import Camera
 
 TOL = 1e-5
 PARAMS = ("means", "log_scales", "quats", "opacity_logits", "colors", "features")

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import torch
 
+from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
-from gsbench.scene import Camera
 
 
 def look_at(W: int, H: int, eye, target=(0.0, 0.0, 0.0), f: float | None = None, fy_ratio: float = 1.0,

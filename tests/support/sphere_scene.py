@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from gsbench.camera import Camera
 from gsbench.datasets.base import Scene
-from gsbench.scene import Camera
 
 SPHERES = [  # centre, radius, class index
     ((0.0, 0.0, 0.35), 0.35, 0),
