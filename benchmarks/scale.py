@@ -29,6 +29,7 @@ from pathlib import Path
 import gsbench  # noqa: F401  (before torch: gsbench's OpenMP default)
 
 # isort: split
+from gsbench import rundir
 from gsbench.environment import PeakMemory
 
 PRESET = "room-medium"
@@ -151,8 +152,8 @@ def _run(args, work: Path) -> int:
     ph.rows[-1]["note"] = f"hits {hits}, cache {size_mb:.0f} MB on disk"
     del pri
     ph.run("train", lambda: train_run(cfg, scene_dir, run_dir, progress=False))
-    summary = json.loads((run_dir / "train_summary.json").read_text())
-    log = [json.loads(x) for x in (run_dir / "train_log.jsonl").read_text().splitlines() if x.strip()]
+    summary = json.loads((run_dir / rundir.TRAIN_SUMMARY).read_text())
+    log = [json.loads(x) for x in (run_dir / rundir.TRAIN_LOG).read_text().splitlines() if x.strip()]
     steps = [r["wall_s"] for r in log if "wall_s" in r]
     step_s = (steps[-1] - steps[0]) / (len(steps) - 1) if len(steps) > 1 else (steps[0] if steps else None)
     n_g = summary.get("n_gaussians") or (summary.get("info") or {}).get("n_gaussians")

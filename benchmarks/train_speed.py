@@ -34,6 +34,7 @@ import gsbench  # noqa: F401  (before torch: gsbench's OpenMP default)
 # isort: split
 import torch
 
+from gsbench import rundir
 from gsbench.gaussians import GaussianField
 from gsbench.render import render
 
@@ -137,7 +138,7 @@ def harness_its(method: str, n: int, w: int, h: int, device: torch.device, iters
         run = train_run(cfg, _scene(root, w, h), root / f"{method}_{device.type}_{n}_{w}x{h}", progress=False)
     finally:
         phases.enable(False)
-    log = [r for r in read_jsonl(run / "train_log.jsonl") if "loss" in r]
+    log = [r for r in read_jsonl(run / rundir.TRAIN_LOG) if "loss" in r]
     first, last = log[0], log[-1]
     its = (last["step"] - first["step"]) / max(1e-9, last["wall_s"] - first["wall_s"])
     return its, phase_ms(phases.totals(), last["step"], last["wall_s"])

@@ -13,7 +13,7 @@ Columns (what the reports read, plus a few extras):
   left out, "" when nothing), metric, value (float, NaN = not computed), metric_impl,
   extras: protocols (comma-joined list of the protocols the run was evaluated under),
   reason (why the value is missing: results' `skipped` entry of that metric name), source ("metrics" | "timings" |
-  "memory"), config_key (hash of the resolved config without seed, run id and paths: runs that
+  "memory"), config_key (gsbench.config.config_key: the canonical config without its seed: runs that
   differ only by seed share it), machine.<key> (host, cpu, cores, torch, ...), env.<key>
   (git_sha, platform, ... from the run's env.json when it exists: provenance only).
 
@@ -23,7 +23,6 @@ the latent-d table can read them like any metric. Written as runs_dir/collected.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from pathlib import Path
@@ -31,6 +30,8 @@ from typing import Any
 
 import pandas as pd
 
+from gsbench import rundir
+from gsbench.config import config_key
 from gsbench.errors import InputError
 from gsbench.results import KNOWN_METRICS
 from gsbench.store import read_json, write_bytes_atomic, write_text_atomic
@@ -42,7 +43,6 @@ BASE_COLUMNS = [
 TAIL_COLUMNS = ["metric", "value", "metric_impl", "reason", "source", "config_key"]
 REQUIRED_KEYS = ("run_id", "method", "scene", "metrics")
 # Keys of the resolved config that differ between runs of one cell without changing the experiment.
-_VOLATILE_CONFIG_KEYS = {"seed", "run_id", "scene", "scene_path", "run_dir", "out", "output", "cache_dir", "dropped"}
 COLLECTED_PARQUET = "collected.parquet"
 COLLECTED_CSV = "collected.csv"
 
@@ -55,7 +55,7 @@ def find_results(runs_dir: Path) -> list[Path]:
     if not runs_dir.is_dir():
         raise NotADirectoryError(f"{runs_dir}: not a folder")
     out = []
-    for p in sorted(runs_dir.rglob("results.json")):
+    for p in sorted(runs_dir.rglob(rundir.RESULTS)):
         rel = p.relative_to(runs_dir).parts
         if any(part.startswith(".") for part in rel[:-1]):
             continue
@@ -77,18 +77,6 @@ def _scalar(value: Any) -> Any:
     if value is None or isinstance(value, (bool, int, float, str)):
         return value
     return json.dumps(value, sort_keys=True)
-
-
-def config_key(config: Any) -> str:
-    """Hash of the resolved config without seed and path-like keys: the cell a run belongs to."""
-    def strip(obj: Any) -> Any:
-        if isinstance(obj, dict):
-            return {k: strip(v) for k, v in obj.items() if k not in _VOLATILE_CONFIG_KEYS}
-        if isinstance(obj, list):
-            return [strip(v) for v in obj]
-        return obj
-    text = json.dumps(strip(config if config is not None else {}), sort_keys=True, default=str)
-    return hashlib.sha1(text.encode("utf-8")).hexdigest()[:10]
 
 
 def missing_reason(metric: str, skipped: dict, status: str) -> str:
@@ -191,7 +179,7 @@ def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
         base[f"requested.{k}"] = _scalar(v)
     for k, v in machine.items():
         base[f"machine.{k}"] = _scalar(v)
-    env = _read_env(path.parent / "env.json")
+    env = _read_env(path.parent / rundir.ENV)
     for k in ENV_KEYS:
         if k in env:
             base[f"env.{k}"] = _scalar(env[k])
@@ -240,8 +228,8 @@ def _unreadable_row(path: Path, error: str) -> dict:
     Identity comes from the run's config.json when that one is readable, else from the folder name."""
     config: Any = {}
     try:
-        if (path.parent / "config.json").exists():
-            config = read_json(path.parent / "config.json")
+        if (path.parent / rundir.CONFIG).exists():
+            config = read_json(path.parent / rundir.CONFIG)
     except InputError:
         pass
     config = config if isinstance(config, dict) else {}

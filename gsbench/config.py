@@ -263,7 +263,10 @@ def validate(cfg: Mapping) -> None:
         check_value(key, value, leaves, "config")
 
 
-def _canonical(cfg: dict) -> dict:
+def canonical(cfg: dict) -> dict:
+    """The config as far as it decides what a run computes: without the keys that only say where things
+    are kept (NON_RESULT_KEYS), without bookkeeping (dropped, resolved, scene, run_id) and without
+    another method's own section. The one form both hashes below read."""
     c = copy.deepcopy(cfg)
     for path in NON_RESULT_KEYS:
         d = c
@@ -275,7 +278,7 @@ def _canonical(cfg: dict) -> dict:
         c.pop(k, None)
     # another method's own section (a plugin's) does not change this run: an installed plugin leaves
     # the run ids of every other method as they were
-    own = get_spec(c["method"]).section if "method" in c else None
+    own = get_spec(c["method"]).section if c.get("method") in METHODS else None
     for section in section_defaults():
         if section != own:
             c.pop(section, None)
@@ -283,15 +286,26 @@ def _canonical(cfg: dict) -> dict:
 
 
 def run_id(config: dict, scene_fingerprint: str) -> str:
-    """Hash of the config (without paths/bookkeeping) and the scene fingerprint: 16 hex digits."""
-    text = json.dumps({"config": _canonical(config), "scene": scene_fingerprint}, sort_keys=True, default=str)
+    """The run's identity: hash of the canonical config (seed included) and the scene fingerprint, 16
+    hex digits. A grid names and resumes its cells by it."""
+    text = json.dumps({"config": canonical(config), "scene": scene_fingerprint}, sort_keys=True, default=str)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
+
+def config_key(config: Optional[dict]) -> str:
+    """The setting a run belongs to: hash of the canonical config without its seed, 16 hex digits, so the
+    seeds of one setting share it (collect's `config_key` column). No config: the hash of {}."""
+    c = canonical(config) if config else {}
+    c.pop("seed", None)
+    return hashlib.sha256(json.dumps(c, sort_keys=True, default=str).encode("utf-8")).hexdigest()[:16]
 
 
 __all__ = [
     "load_config",
     "load_tree",
     "run_id",
+    "config_key",
+    "canonical",
     "parse_overrides",
     "apply_overrides",
     "check_value",

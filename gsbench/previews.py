@@ -35,11 +35,12 @@ from typing import Optional
 
 import numpy as np
 
+from gsbench import rundir
 from gsbench.errors import InputError
 from gsbench.store import read_json, write_bytes_atomic, write_json_atomic
 
 log = logging.getLogger(__name__)
-PREVIEWS_DIR = "previews"
+PREVIEWS_DIR = rundir.PREVIEWS
 MANIFEST = "previews.json"
 PREVIEWS_VERSION = 1
 FRAME_ARRAYS = ("render", "gt", "depth", "alpha", "gt_depth", "pred", "gt_masks")

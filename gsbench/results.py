@@ -22,9 +22,10 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable, Optional
 
+from gsbench.config_keys import QUERY_MODES
+
 RESULTS_VERSION = 2
 STATUSES = ("done", "failed", "nonfinite")
-QUERY_MODES = ("encode", "decode")
 FRAME_SETS = ("reference", "held-out")
 FRAME_SET_SUFFIX = {"reference": "", "held-out": "_heldout"}
 

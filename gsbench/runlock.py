@@ -26,11 +26,12 @@ import uuid
 from pathlib import Path
 from typing import Optional
 
+from gsbench import rundir
 from gsbench.errors import InputError
 
 log = logging.getLogger(__name__)
 
-LOCK_FILE = "writer.lock"
+LOCK_FILE = rundir.LOCK
 HEARTBEAT_S = 10.0
 STALE_AFTER_S = 120.0
 _held: dict[str, int] = {}          # lock path -> nesting depth in this process

@@ -21,28 +21,19 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from gsbench import rundir
 from gsbench.config import run_id
 from gsbench.datasets import load_scene, scene_fingerprint
+from gsbench.device import resolve_device
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.methods.base import Method
-from gsbench.methods.device import resolve_device
 from gsbench.methods.registry import get_method, resolve_for_scene
 from gsbench.runlock import RunLock
 from gsbench.store import read_json, read_jsonl, write_json_atomic
 from gsbench.training import train_method
 
 log = logging.getLogger(__name__)
-MODEL = "model.pt"
-
-
-def _status(run_dir: Path, state: str, message: str = "", **extra) -> None:
-    write_json_atomic(run_dir / "status.json", {"state": state, "message": message, "time": time.time(), **extra})
-
-
-def read_status(run_dir: Path) -> dict | None:
-    p = Path(run_dir) / "status.json"
-    return read_json(p) if p.exists() else None
 
 
 def _load_scene(scene_path):
@@ -83,9 +74,9 @@ def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: boo
 def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) -> Path:
     fp = _fingerprint(scene_path)
     rid = run_id(config, fp)
-    st = read_status(run_dir)
-    if (run_dir / "config.json").exists():
-        old = read_json(run_dir / "config.json")
+    st = rundir.read_status(run_dir)
+    if (run_dir / rundir.CONFIG).exists():
+        old = read_json(run_dir / rundir.CONFIG)
         if old.get("run_id") != rid:
             raise InputError(f"{run_dir}: the folder holds run {old.get('run_id')} (another config or scene); "
                              f"use a new --out folder")
@@ -106,10 +97,10 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
     threads_before = torch.get_num_threads()
     # a grid executor sets GSBENCH_THREADS (cores // jobs) so parallel cells do not oversubscribe
     torch.set_num_threads(int(os.environ.get("GSBENCH_THREADS") or 0) or max(1, os.cpu_count() or 1))
-    write_json_atomic(run_dir / "config.json", cfg)
-    write_json_atomic(run_dir / "env.json", env_info())
+    write_json_atomic(run_dir / rundir.CONFIG, cfg)
+    write_json_atomic(run_dir / rundir.ENV, env_info())
     prev_s = float((st or {}).get("train_s_so_far") or 0.0)
-    _status(run_dir, "running", "", train_s_so_far=prev_s)
+    rundir.write_status(run_dir, "running", "", train_s_so_far=prev_s)
     method = get_method(cfg["method"])()
     t0 = time.perf_counter()
     memory = PeakMemory(_device(cfg)).start()
@@ -119,23 +110,24 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
         _finish(run_dir, method, cfg, "nonfinite", str(e), prev_s + time.perf_counter() - t0, memory.read())
         raise
     except KeyboardInterrupt:
-        _status(run_dir, "failed", "interrupted; re-run to resume from the last checkpoint",
+        rundir.write_status(run_dir, "failed", "interrupted; re-run to resume from the last checkpoint",
                 train_s_so_far=prev_s + time.perf_counter() - t0)
         raise
     except Exception as e:
-        _status(run_dir, "failed", f"{type(e).__name__}: {e}", train_s_so_far=prev_s + time.perf_counter() - t0)
+        rundir.write_status(run_dir, "failed", f"{type(e).__name__}: {e}",
+                            train_s_so_far=prev_s + time.perf_counter() - t0)
         raise
     finally:
         torch.set_num_threads(threads_before)
     train_s = prev_s + time.perf_counter() - t0
     peaks = memory.read()
-    method.save(run_dir / MODEL)
+    method.save(run_dir / rundir.MODEL)
     _finish(run_dir, method, cfg, "done", "", train_s, peaks)
     return run_dir
 
 
 def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s: float, peaks: dict) -> None:
-    log = read_jsonl(run_dir / "train_log.jsonl")
+    log = read_jsonl(run_dir / rundir.TRAIN_LOG)
     steps = [int(r["step"]) for r in log if "step" in r]
     last_eval = next((r["eval"] for r in reversed(log) if "eval" in r), None)
     n = method.field.num if getattr(method, "field", None) is not None else None
@@ -146,19 +138,19 @@ def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s:
                "last_eval": last_eval, "info": getattr(method, "info", {})}
     if "peak_cuda_mb" in peaks:
         summary["train_peak_cuda_mb"] = peaks["peak_cuda_mb"]
-    write_json_atomic(run_dir / "train_summary.json", summary)
-    _status(run_dir, state, message, train_s_so_far=train_s)
+    write_json_atomic(run_dir / rundir.TRAIN_SUMMARY, summary)
+    rundir.write_status(run_dir, state, message, train_s_so_far=train_s)
 
 
 def load_run(run_dir: str | Path):
     """(trained Method, resolved config, Scene) of a finished run folder."""
     run_dir = Path(run_dir)
-    st = read_status(run_dir)
+    st = rundir.read_status(run_dir)
     if st is None:
         raise FileNotFoundError(f"{run_dir / 'status.json'}: not a run folder (no status.json)")
     if st.get("state") != "done":
         raise InputError(f"{run_dir}: run is not finished (status {st.get('state')!r}: {st.get('message', '')})")
-    cfg = read_json(run_dir / "config.json")
-    method = Method.load(run_dir / MODEL)
+    cfg = read_json(run_dir / rundir.CONFIG)
+    method = Method.load(run_dir / rundir.MODEL)
     scene = _load_scene(cfg["scene"]["path"])
     return method, cfg, scene

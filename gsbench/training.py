@@ -28,10 +28,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from gsbench import rundir
 from gsbench.errors import InputError
 from gsbench.evaluation import segmentation_metrics
 from gsbench.gaussians import GaussianField
-from gsbench.methods.trainer import CHECKPOINT, TRAIN_LOG, Trainer, load_checkpoint_if_any
+from gsbench.methods.trainer import Trainer, load_checkpoint_if_any
 from gsbench.metrics import psnr, ssim
 from gsbench.render import render
 from gsbench.store import append_jsonl, read_jsonl, save_torch_atomic, write_text_atomic
@@ -58,7 +59,7 @@ def train_method(method, scene, run_dir: Path, config: dict, progress: bool = Tr
 def run_phase(tr: Trainer, run_dir: Path, eval_fn: Optional[Callable[[GaussianField], dict]], *,
               progress: bool = True, resume_state: Optional[dict] = None) -> GaussianField:
     """Run one phase's steps to its last iteration; return its final field (a checkpoint is written)."""
-    log_path = Path(run_dir) / TRAIN_LOG
+    log_path = Path(run_dir) / rundir.TRAIN_LOG
     if resume_state is not None:
         tr.load_state(resume_state)
         # drop log lines written after the checkpoint (they will be produced again)
@@ -117,12 +118,12 @@ def run_phase(tr: Trainer, run_dir: Path, eval_fn: Optional[Callable[[GaussianFi
             ev = eval_fn(tr.field)
             append_jsonl(log_path, {"phase": tr.phase, "step": step, "wall_s": round(tr.elapsed, 4), "eval": ev})
         if is_ckpt:
-            save_torch_atomic(Path(run_dir) / CHECKPOINT, tr.state())
+            save_torch_atomic(Path(run_dir) / rundir.CHECKPOINT, tr.state())
     bar.close()
     tr.synchronize()
     tr.raise_if_bad()
     tr.check_finite("parameters")
-    save_torch_atomic(Path(run_dir) / CHECKPOINT, tr.state())
+    save_torch_atomic(Path(run_dir) / rundir.CHECKPOINT, tr.state())
     return tr.field
 
 

@@ -28,13 +28,15 @@ import numpy as np
 import torch
 
 from gsbench.camera import Camera, training_size
+from gsbench.config_keys import QUERY_MODES
 from gsbench.datasets.imageio import resize_rgb
 from gsbench.datasets.splits import split_ids
+from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.methods.autoencoder import FeatureAutoencoder
 from gsbench.methods.common import resolve_render_backend
-from gsbench.methods.device import prepare_backend, resolve_backend_for, resolve_device
+from gsbench.methods.device import prepare_backend, resolve_backend_for
 from gsbench.methods.registry import get_method
 from gsbench.methods.residency import DEVICE, data_on, place
 from gsbench.methods.trainer import Trainer, TrainViews, init_field
@@ -42,10 +44,8 @@ from gsbench.priors import get_feature_provider
 from gsbench.render import RenderOutput, render
 from gsbench.store import load_torch, save_torch_atomic
 
-QUERY_MODES = ("encode", "decode")
 # what train_phases returns: yields each phase's Trainer, receives that phase's final field
 Phases = Generator[Trainer, GaussianField, None]
-MODEL_FILE = "model.pt"
 DECODE_CHUNK = 1 << 18   # pixels decoded at once (images up to 512 x 512 in one piece)
 
 

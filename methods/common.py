@@ -6,9 +6,11 @@ from typing import Callable, Optional
 
 import torch
 
+from gsbench import rundir
+from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
-from gsbench.methods.device import resolve_backend_for, resolve_device
+from gsbench.methods.device import resolve_backend_for
 from gsbench.methods.registry import build_priors_request, uses
 from gsbench.methods.trainer import LossResult, Trainer, TrainViews
 from gsbench.priors import prepare_priors
@@ -23,7 +25,7 @@ def resolve_render_backend(config: dict, device: Optional[torch.device] = None) 
 
 def cache_dir_for(config: dict, run_dir: Path) -> Path:
     c = config["priors"].get("cache_dir")
-    return Path(c) if c else Path(run_dir).resolve().parent / ".gsbench_cache"
+    return Path(c) if c else Path(run_dir).resolve().parent / rundir.CACHE_DIRNAME
 
 
 def fit_priors(scene, config: dict, run_dir: Path, *, progress: bool):

@@ -1,8 +1,5 @@
-"""Where training runs: `train.device` (auto | cpu | cuda | cuda:N) resolved once, checked up front.
-
-Everything a step touches (field, Adam state, images, priors, autoencoder, losses, densification
-statistics) is created on or moved to this device by the methods, so a step never copies to the host.
-"""
+"""The render backend for a training device (auto | torch | cpu | gsplat), checked up front, and gsplat's
+CUDA extension built before any work. The device rule itself is gsbench/device.py."""
 from __future__ import annotations
 
 import logging
@@ -10,41 +7,11 @@ from typing import Iterable
 
 import torch
 
+from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.render.gsplat_ext import NEEDS_BUILD, build_gsplat_extension, gsplat_status
 
 log = logging.getLogger(__name__)
-CPU_ONLY_BACKENDS = ("cpu",)    # backends that render CPU tensors only: `auto` devices follow them
-
-
-def resolve_device(config: dict) -> torch.device:
-    """The torch device of `train.device`. 'auto' = the CPU when the config's backend renders on the
-    CPU only (backend: cpu, as the CPU presets pin it), else cuda:0 when CUDA is available, else the CPU.
-
-    Asking for CUDA on a machine without it is a one-line InputError (no silent CPU fallback)."""
-    want = str((config.get("train") or {}).get("device", "auto") or "auto").strip().lower()
-    if want == "auto":
-        if str(config.get("backend") or "auto") in CPU_ONLY_BACKENDS:
-            return torch.device("cpu")
-        return torch.device("cuda", 0) if torch.cuda.is_available() else torch.device("cpu")
-    if want == "cpu":
-        return torch.device("cpu")
-    if want == "cuda" or want.startswith("cuda:"):
-        idx = 0
-        if want != "cuda":
-            try:
-                idx = int(want.split(":", 1)[1])
-            except ValueError:
-                raise InputError(f"train.device: {want!r} is not auto, cpu, cuda or cuda:N") from None
-        if not torch.cuda.is_available():
-            raise InputError(f"train.device={want}: CUDA is not available on this machine "
-                             f"(torch {torch.__version__}, built with CUDA {torch.version.cuda}); "
-                             f"use train.device=cpu or auto")
-        n = torch.cuda.device_count()
-        if idx < 0 or idx >= n:
-            raise InputError(f"train.device={want}: this machine has {n} CUDA device(s) (cuda:0..cuda:{n - 1})")
-        return torch.device("cuda", idx)
-    raise InputError(f"train.device: {want!r} is not auto, cpu, cuda or cuda:N")
 
 
 def gsplat_available() -> bool:
@@ -108,5 +75,4 @@ def prebuild_for(configs: Iterable[dict]) -> bool:
     return False
 
 
-__all__ = ["resolve_device", "resolve_backend_for", "gsplat_available", "prepare_backend", "prebuild_for",
-           "CPU_ONLY_BACKENDS"]
+__all__ = ["resolve_backend_for", "gsplat_available", "prepare_backend", "prebuild_for"]

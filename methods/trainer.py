@@ -32,16 +32,14 @@ from typing import Callable, Optional
 import numpy as np
 import torch
 
+from gsbench import rundir
 from gsbench.camera import Camera
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
 from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
 from gsbench.phases import timed
 from gsbench.render import RenderOutput, render
-from gsbench.store import load_torch, save_torch_atomic
-
-CHECKPOINT = "checkpoint.pt"
-TRAIN_LOG = "train_log.jsonl"
+from gsbench.store import load_torch
 
 LR_KEYS = {"colors": "color", "opacity_logits": "opacity", "log_scales": "scaling", "quats": "rotation",
            "features": "semantic"}
@@ -223,7 +221,7 @@ class Trainer:
         if ((dev is not None and torch.device(dev).type != self.device.type) or size_differs
                 or (backend is not None and backend != self.backend)):
             was = f"{dev or 'another kind of device'}" + (f" with backend {backend}" if backend else "")
-            raise InputError(f"{self.run_dir / CHECKPOINT}: written training on {was}; this run resolves to "
+            raise InputError(f"{self.run_dir / rundir.CHECKPOINT}: written training on {was}; this run resolves to "
                              f"{self.device} with backend {self.backend} here. Resume it on the kind of machine that "
                              f"started it, or delete the checkpoint to train this run from step 0")
 
@@ -244,9 +242,6 @@ class Trainer:
         self.torch_gen.set_state(st["torch_gen"].cpu() if torch.is_tensor(st["torch_gen"]) else st["torch_gen"])
         torch.set_rng_state(st["torch_rng"])
 
-    def save_checkpoint(self) -> None:
-        save_torch_atomic(self.run_dir / CHECKPOINT, self.state())
-
     # ------------------------------------------------------------------ schedule
     def _next_view(self) -> int:
         if not self.view_stack:
@@ -265,7 +260,7 @@ class Trainer:
         return v
 
     def _kept(self) -> str:
-        ck = self.run_dir / CHECKPOINT
+        ck = self.run_dir / rundir.CHECKPOINT
         return (f"the last good checkpoint is kept in {ck}" if ck.exists()
                 else "no checkpoint was written before this step")
 
@@ -351,9 +346,8 @@ class Trainer:
 
 
 def load_checkpoint_if_any(run_dir: Path) -> Optional[dict]:
-    p = Path(run_dir) / CHECKPOINT
+    p = Path(run_dir) / rundir.CHECKPOINT
     return load_torch(p) if p.exists() else None
 
 
-__all__ = ["Trainer", "TrainViews", "LossResult", "StepResult", "init_field", "load_checkpoint_if_any",
-           "CHECKPOINT", "TRAIN_LOG"]
+__all__ = ["Trainer", "TrainViews", "LossResult", "StepResult", "init_field", "load_checkpoint_if_any"]

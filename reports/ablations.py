@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from gsbench.collect import config_key
+from gsbench.config import config_key
 from gsbench.methods.registry import method_sort_key
 from gsbench.reports.data import MAIN_STUDIES, Results, is_null, mean_of_cells, same
 

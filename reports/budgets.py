@@ -11,6 +11,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from gsbench import rundir
 from gsbench.methods.registry import METHODS
 from gsbench.methods.registry import budget as method_budget
 from gsbench.reports.data import Results, is_null
@@ -38,7 +39,7 @@ def run_budget(res: Results, rid: str) -> tuple[int | None, int | None, str, str
     if "budget.iterations" in cols and not is_null(res.runs.at[rid, "budget.iterations"]):
         sem = res.runs.at[rid, "budget.semantic_iterations"] if "budget.semantic_iterations" in cols else None
         return _int(res.runs.at[rid, "budget.iterations"]), _int(sem), "results budget", None
-    path = Path(str(res.runs.at[rid, "run_dir"])) / "results.json"
+    path = Path(str(res.runs.at[rid, "run_dir"])) / rundir.RESULTS
     try:
         data = read_json(path)
     except Exception as exc:  # a collected table read without its run folders

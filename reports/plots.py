@@ -22,6 +22,7 @@ from gsbench.reports.data import Results, is_null, same  # noqa: E402
 
 from gsbench.reports.spec import (AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # noqa: E402  # isort: skip
                                   LOGICAL, NOISE_LABELS, NOISE_ORDER, method_label, metric_spec)
+from gsbench import rundir
 from gsbench.reports.stats import pearson  # noqa: E402
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, _slug, runs_of, scene_protocols  # noqa: E402
 from gsbench.reports.sweeps import (
@@ -67,7 +68,7 @@ def train_curve(run_dir: str, metric_keys: list[str]) -> tuple[list[float], list
     twostage's rgb then semantic) each restart wall_s; they are laid end to end."""
     xs, ys = [], []
     offset, phase, phase_end = 0.0, None, 0.0
-    for rec in read_jsonl(Path(run_dir) / "train_log.jsonl"):
+    for rec in read_jsonl(Path(run_dir) / rundir.TRAIN_LOG):
         if not isinstance(rec, dict):
             continue
         wall = rec.get("wall_s")

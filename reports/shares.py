@@ -16,6 +16,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from gsbench import rundir
 from gsbench.reports.data import Results, is_null  # noqa: E402
 from gsbench.reports.plots import _save, run_label  # noqa: E402
 from gsbench.store import read_jsonl  # noqa: E402
@@ -28,7 +29,7 @@ def read_shares(run_dir: str) -> dict[int, dict[str, float]]:
     a later line for the same step and phase replaces an earlier one)."""
     out: dict[int, dict[str, float]] = {}
     offset, phase, last = 0, None, 0
-    for rec in read_jsonl(Path(run_dir) / "train_log.jsonl"):
+    for rec in read_jsonl(Path(run_dir) / rundir.TRAIN_LOG):
         if not isinstance(rec, dict):
             continue
         step = rec.get("step")

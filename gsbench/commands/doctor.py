@@ -66,7 +66,8 @@ def _numba_lines() -> list[str]:
 
 
 def _auto_lines() -> list[str]:
-    from gsbench.methods.device import resolve_backend_for, resolve_device  # lazy: start-up (cli loads all commands)
+    from gsbench.device import resolve_device  # lazy: start-up (cli loads all commands)
+    from gsbench.methods.device import resolve_backend_for  # lazy: start-up (cli loads all commands)
     lines = ["auto picks (train.device and backend as each preset sets them):"]
     for preset in PRESETS:
         cfg = load_config("gaussiands", None if preset == "default" else preset, [])

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gsbench import rundir
 from gsbench.config import load_config, set_args
 from gsbench.method_table import METHODS
 from gsbench.store import read_json
@@ -30,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = config_from_args(args)
     out = train_run(cfg, Path(args.scene), Path(args.out), progress=not args.no_progress)
-    s = read_json(out / "train_summary.json")
+    s = read_json(out / rundir.TRAIN_SUMMARY)
     ev = s.get("last_eval") or {}
     psnr = ev.get("psnr")
     print(f"gsbench train: {s['status']} {out} method={s['method']} iterations={s['iterations']} "

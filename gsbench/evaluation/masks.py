@@ -17,6 +17,7 @@ from typing import Optional
 
 import numpy as np
 
+from gsbench import rundir
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError
 from gsbench.metrics import NEAREST_IMPL, resize_nearest
@@ -62,7 +63,7 @@ def score_mask_folder(pred_dir: str | os.PathLike, layout_dir: str | os.PathLike
 
 
 def write_results(out: Path, res: dict) -> None:
-    write_json_atomic(out / "results.json", res)
+    write_json_atomic(out / rundir.RESULTS, res)
 
 
 def _check_known_names(pred_dir: Path, known: set[str], what: str, source: Path) -> None:

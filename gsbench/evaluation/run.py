@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Any, Optional
 
+from gsbench import rundir
 from gsbench.environment import PeakMemory, env_info
 from gsbench.metrics import ordering as MO
 from gsbench.results import ORDERING_METRICS, SEG_BASES, run_results, seg_metric
@@ -26,13 +27,9 @@ from .segmentation import query_mode, resolve_protocols, segmentation
 log = logging.getLogger(__name__)
 
 
-def _read_optional(path: Path) -> dict:
-    return read_json(path) if path.exists() else {}
-
-
 def _ordering(run_dir: Path) -> Block:
     out = Block()
-    summary = _read_optional(run_dir / "train_summary.json")
+    summary = rundir.read_optional(run_dir / rundir.TRAIN_SUMMARY)
     stats = (summary.get("info") or {}).get("priors_stats") or summary.get("priors_stats") or {}
     impls = {"ordering_adjacent_distance": MO.ORDERING_DISTANCE_IMPL,
              "ordering_adjacent_mask_iou": MO.ORDERING_MASK_IOU_IMPL,
@@ -111,8 +108,8 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
         out.skip([seg_metric(b, p) for b in SEG_BASES[p]], why)
     frames_skipped = _unscored(scene, fs, protocols, sets)
 
-    summary = _read_optional(run_dir / "train_summary.json")
-    train_status = _read_optional(run_dir / "status.json")
+    summary = rundir.read_optional(run_dir / rundir.TRAIN_SUMMARY)
+    train_status = rundir.read_optional(run_dir / rundir.STATUS)
     out.timings["train_s"] = summary.get("train_s", summary.get("wall_s"))
     out.timings["eval_s"] = time.time() - t_start
     providers = {}
@@ -142,12 +139,12 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
                           train_device=(summary.get("info") or {}).get("device"),
                           eval_device=str(getattr(method, "device", "cpu")),
                           budget=(summary.get("info") or {}).get("budget"))
-    write_json_atomic(run_dir / "results.json", results)
+    write_json_atomic(run_dir / rundir.RESULTS, results)
     return results
 
 
 def _cell_field(run_dir: Path, key: str) -> Any:
-    p = run_dir / "cell.json"
+    p = run_dir / rundir.CELL
     return read_json(p).get(key) if p.exists() else None
 
 

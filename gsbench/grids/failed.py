@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from gsbench import rundir
 from gsbench.datasets import load_scene
 from gsbench.environment import env_info
 from gsbench.evaluation import resolve_protocols
@@ -14,7 +15,7 @@ def write_failed_results(spec: dict, run_dir: Path, status: dict) -> dict:
     """results.json of a failed cell (schema and builder: gsbench.results): status "failed", every
     metric null with the error as its reason. Identity fields come from the run's config.json when
     training got that far (the resolved config), else from the cell's config."""
-    cfg_path = run_dir / "config.json"
+    cfg_path = run_dir / rundir.CONFIG
     config = spec.get("config") or {}
     try:
         if cfg_path.exists():
@@ -39,5 +40,5 @@ def write_failed_results(spec: dict, run_dir: Path, status: dict) -> dict:
     reason = f"run failed (attempt {status.get('attempt')}): {status.get('error', 'unknown error')}"
     results = failed_results(identity=identity, reason=reason, machine=env_info(),
                              timings={"train_s": None, "eval_s": None, "cell_wall_s": status.get("wall_s")})
-    write_json_atomic(run_dir / "results.json", results)
+    write_json_atomic(run_dir / rundir.RESULTS, results)
     return results

@@ -10,11 +10,12 @@ import time
 from pathlib import Path
 from typing import Optional
 
+from gsbench import rundir
 from gsbench.runlock import pid_alive
 from gsbench.store import read_json
 
-CELL_FILE = "cell.json"
-CELL_STATUS_FILE = "cell_status.json"
+CELL_FILE = rundir.CELL
+CELL_STATUS_FILE = rundir.CELL_STATUS
 HEARTBEAT_S = 10.0
 STALE_AFTER_S = 120.0
 
@@ -50,7 +51,7 @@ def cell_state(run_dir: Optional[Path], now: Optional[float] = None) -> str:
 
 def results_finished(run_dir: Path) -> bool:
     """results.json exists, is readable and is not a failure record (status "failed")."""
-    p = Path(run_dir) / "results.json"
+    p = Path(run_dir) / rundir.RESULTS
     if not p.exists():
         return False
     try:

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
 
+from gsbench import rundir
 from gsbench.config import get_dotted, load_config
 from gsbench.config import run_id as make_run_id
 from gsbench.datasets import scene_fingerprint
@@ -16,7 +17,7 @@ from gsbench.errors import InputError
 from gsbench.grids.spec import Cell, Grid, SceneSpec
 from gsbench.store import write_json_atomic
 
-CACHE_DIRNAME = ".gsbench_cache"
+CACHE_DIRNAME = rundir.CACHE_DIRNAME
 SCENES_DIRNAME = "scenes"
 
 

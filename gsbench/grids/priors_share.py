@@ -7,10 +7,10 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from gsbench.datasets import load_scene
+from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.grids.executors import apply_thread_budget
 from gsbench.grids.planning import PlannedCell
-from gsbench.methods.device import resolve_device
 from gsbench.methods.registry import priors_request as method_priors_request
 from gsbench.priors import prepare_priors
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from gsbench import rundir
 from gsbench.evaluation import evaluate_run
 from gsbench.grids.executors import apply_thread_budget
 from gsbench.grids.failed import write_failed_results
@@ -71,7 +72,7 @@ def _run_cell_locked(spec: dict, run_dir: Path) -> dict:
     prev = read_cell_status(run_dir)
     status = {"state": "running", "pid": os.getpid(), "host": socket.gethostname(), "started": time.time(),
               "heartbeat": time.time(), "attempt": int(prev.get("attempt", 0)) + 1, "phase": "train",
-              "resumed": (run_dir / "checkpoint.pt").exists()}
+              "resumed": (run_dir / rundir.CHECKPOINT).exists()}
     write_json_atomic(run_dir / CELL_STATUS_FILE, status)
     cell_json = run_dir / CELL_FILE
     if not cell_json.exists():

@@ -36,6 +36,7 @@ from tqdm.auto import tqdm
 
 from gsbench.config import check_key
 from gsbench.datasets.noise import apply_noise
+from gsbench.device import default_device
 from gsbench.errors import InputError
 from gsbench.priors import warp as W
 from gsbench.priors.weights import require_weights
@@ -124,7 +125,6 @@ class DepthAnything:
         require_weights("priors.depth.model_path", model_path, "Depth Anything",
                         "priors.depth.provider=depth-anything", folder=True)
         try:
-            import torch
             from transformers import AutoImageProcessor, AutoModelForDepthEstimation
         except ImportError as e:
             raise InputError(f"priors.depth.provider=depth-anything needs the `models` extra "
@@ -136,7 +136,7 @@ class DepthAnything:
             raise InputError(f"priors.depth.model_path: {model_path} is not a loadable Depth Anything "
                              f"folder (Depth Anything weights are needed for --set "
                              f"priors.depth.provider=depth-anything): {e}") from None
-        device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+        device = device or default_device()
         self.model = self.model.to(device).float().eval()
         self.device = device
         self.id = f"depth-anything:{Path(model_path).resolve().name}"

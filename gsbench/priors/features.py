@@ -22,6 +22,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from gsbench.device import default_device
 from gsbench.errors import InputError
 from gsbench.priors import clipspace as C
 from gsbench.priors.labels import label_view
@@ -202,11 +203,10 @@ class OpenClipFeatures(FeatureProvider):
                         "priors.features.provider=openclip")
         try:
             import open_clip
-            import torch
         except ImportError as e:
             raise InputError(f"priors.features.provider=openclip needs the `models` extra "
                              f"(pip install -e .[models]): {e}") from None
-        self.device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+        self.device = device or default_device()
         try:
             self.model, _, self.preprocess = open_clip.create_model_and_transforms(
                 model, pretrained=str(checkpoint), device=self.device)

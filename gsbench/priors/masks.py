@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
+from gsbench.device import default_device
 from gsbench.errors import InputError
 from gsbench.priors.warp import resize_nearest
 from gsbench.priors.weights import require_weights
@@ -60,13 +61,12 @@ class Sam2Masks:
             raise InputError("priors.masks.model_config: not set (the SAM2 model config name matching "
                              "the checkpoint, e.g. configs/sam2.1/sam2.1_hiera_t.yaml)")
         try:
-            import torch
             from sam2.automatic_mask_generator import SAM2AutomaticMaskGenerator
             from sam2.build_sam import build_sam2_video_predictor
         except ImportError as e:
             raise InputError(f"priors.masks.provider=sam2 needs the `models` extra "
                              f"(pip install -e .[models]): {e}") from None
-        device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+        device = device or default_device()
         self.checkpoint = str(ckpt)
         self.model_config = str(model_cfg)
         self.generator_kwargs = dict(masks_cfg.get("generator", {}) or {})

@@ -20,6 +20,7 @@ from typing import Mapping, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
+from gsbench import rundir
 from gsbench.errors import InputError
 from gsbench.metrics import ordering as MO
 from gsbench.priors import depth as D
@@ -376,4 +377,4 @@ def track_mean_features(features: Mapping[tuple[int, int], np.ndarray]) -> dict[
 
 def default_cache_dir(runs_parent: str | os.PathLike) -> Path:
     """The default cache folder for `priors.cache_dir: null`: <runs parent>/.gsbench_cache."""
-    return Path(runs_parent) / ".gsbench_cache"
+    return Path(runs_parent) / rundir.CACHE_DIRNAME

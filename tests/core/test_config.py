@@ -1,4 +1,6 @@
 """Config loading, overrides, run ids and the per-scene resolver."""
+import json
+
 import numpy as np
 import pytest
 
@@ -307,3 +309,23 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     assert set(config_keys.NOISE_TYPES) == {None, *NOISE_KINDS}
     assert set(config_keys.NOISE_SEVERITIES) == set(SEVERITIES)
     assert set(config_keys.PROTOCOLS) == set(PROTOCOLS)
+
+
+def test_one_config_hash_rule_for_run_ids_and_config_keys():
+    """run_id and config_key read one canonical config: key order and where-things-are-kept keys do
+    not change them, a training key does, and the seed changes the run id only."""
+    from gsbench.config import config_key, run_id
+    a = load_config("gaussiands", "cpu-small")
+    b = json.loads(json.dumps(a))
+    b = dict(reversed(list(b.items())))                       # another key order
+    b["priors"]["cache_dir"] = "/elsewhere/cache"             # where the cache is kept
+    b["train"]["data_on"] = "host"                            # where the data is kept
+    b["dropped"] = {"priors.depth": "a reason"}               # bookkeeping
+    assert run_id(a, "fp") == run_id(b, "fp") and config_key(a) == config_key(b)
+    c = json.loads(json.dumps(a))
+    c["train"]["iterations"] += 1
+    assert run_id(a, "fp") != run_id(c, "fp") and config_key(a) != config_key(c)
+    s = json.loads(json.dumps(a))
+    s["seed"] = 7
+    assert run_id(a, "fp") != run_id(s, "fp") and config_key(a) == config_key(s)
+    assert run_id(a, "fp") != run_id(a, "other scene")

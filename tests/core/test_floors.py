@@ -39,6 +39,8 @@ FLOORS: dict[str, int] = {
     "gsbench.method_table": 0,     # method names and specs as data (no method imported)
     "gsbench.environment": 0,      # machine facts and peak memory
     "gsbench.runlock": 0,          # one writer per run folder
+    "gsbench.device": 0,           # the one device rule (train.device, a model prior's default)
+    "gsbench.rundir": 0,           # the run folder's file names, status reader beside its writer
     # 1: what a method is built from
     "gsbench.render": 1,
     "gsbench.priors": 1,

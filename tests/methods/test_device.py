@@ -4,8 +4,9 @@ import pytest
 import torch
 from tiny import device_run_overrides
 
+from gsbench.device import resolve_device
 from gsbench.errors import InputError
-from gsbench.methods.device import resolve_backend_for, resolve_device
+from gsbench.methods.device import resolve_backend_for
 
 NO_CUDA = not torch.cuda.is_available()
 

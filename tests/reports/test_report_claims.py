@@ -8,7 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from gsbench.collect import collect, config_key
+from gsbench.collect import collect
+from gsbench.config import config_key
 from gsbench.reports.ablations import loss_subsets_table, parse_dropped
 
 from gsbench.reports.claims import (INCONCLUSIVE, NOT_REPRODUCED, NOT_RUN, NOT_TESTABLE, OPPOSITE,  # isort: skip
