@@ -88,25 +88,6 @@ def read_rgb(path: Path, expect_size: tuple[int, int] | None = None, background:
     return img
 
 
-RESIZE_IMPL = "pil-bicubic-uint8"   # how an RGB image is brought to a smaller (or larger) size
-
-
-def resize_rgb(img: np.ndarray, width: int, height: int) -> np.ndarray:
-    """float32 RGB in [0, 1] at width x height, resized as 3DGS loads its images: the 8-bit image
-    through PIL's bicubic filter (Image.resize's default for RGB), then / 255. The same size is
-    returned unchanged. Used for the training images and the evaluation GT alike."""
-    from PIL import Image
-
-    a = np.asarray(img)
-    if a.shape[1] == width and a.shape[0] == height:
-        return a
-    if a.ndim != 3 or a.shape[2] != 3:
-        raise InputError(f"resize_rgb: expected an H x W x 3 image, got shape {a.shape}")
-    q = np.floor(np.clip(a, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
-    out = Image.fromarray(q, "RGB").resize((int(width), int(height)), Image.Resampling.BICUBIC)
-    return np.asarray(out, dtype=np.float32) / np.float32(255.0)
-
-
 def read_gray(path: Path, expect_size: tuple[int, int] | None = None) -> np.ndarray:
     """Single-channel image as stored (uint8 / uint16), first channel of colour files."""
     img = _decode(path, cv2.IMREAD_UNCHANGED)

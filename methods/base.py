@@ -29,7 +29,6 @@ import torch
 
 from gsbench.camera import Camera, training_size
 from gsbench.config_keys import QUERY_MODES
-from gsbench.datasets.imageio import resize_rgb
 from gsbench.datasets.splits import split_ids
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
@@ -42,6 +41,7 @@ from gsbench.methods.residency import DEVICE, data_on, place
 from gsbench.methods.trainer import Trainer, TrainViews, init_field
 from gsbench.priors import get_feature_provider
 from gsbench.render import RenderOutput, render
+from gsbench.resize import resize_rgb
 from gsbench.store import load_torch, save_torch_atomic
 
 # what train_phases returns: yields each phase's Trainer, receives that phase's final field

@@ -56,7 +56,8 @@ Timing (timing.py)
 """
 from __future__ import annotations
 
-from ._common import NEAREST_IMPL, resize_nearest
+from gsbench.resize import NEAREST_IMPL, resize_nearest
+
 from .image import PSNR_IMPL, SSIM_IMPL, psnr, quantize_uint8, ssim, ssim_map
 
 from .lerf import (CANONICAL_NEGATIVES, LERF_IMPL, LerfPair, LerfSceneResult, box_mean,  # isort: skip

@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable
 
-import cv2
 import numpy as np
 
 from gsbench.errors import InputError
@@ -109,27 +108,4 @@ def pixel_text_cosines(features: Any, texts: np.ndarray, name: str) -> tuple[np.
     return np.where(norm[:, None] > 1e-12, dots / np.maximum(norm, 1e-12)[:, None], 0.0), (h, w)
 
 
-NEAREST_IMPL = "nearest/centre-sampling/cv2-INTER_NEAREST_EXACT"
-
-
-def resize_nearest(a: Any, width: int, height: int) -> np.ndarray:
-    """A label map or mask at width x height by nearest sampling of pixel centres.
-
-    cv2.INTER_NEAREST_EXACT samples the source pixel under each target pixel's centre, as PIL
-    NEAREST (the 3D-OVS reference) does; cv2.INTER_NEAREST samples the top-left one and shifts a
-    downsampled mask by half a source pixel. The dtype is kept (bool in, bool out).
-    """
-    arr = to_numpy(a, "mask")
-    if arr.ndim != 2:
-        raise InputError(f"mask: expected an (H, W) array to resize, got shape {arr.shape}")
-    if width < 1 or height < 1:
-        raise InputError(f"mask: target size {width}x{height} is not positive")
-    if arr.shape == (height, width):
-        return arr
-    dtype = arr.dtype
-    src = arr.astype(np.uint8) if dtype == np.bool_ else arr
-    if src.dtype in (np.int64, np.uint32, np.uint64):
-        src = src.astype(np.int32)
-    out = cv2.resize(src, (int(width), int(height)), interpolation=cv2.INTER_NEAREST_EXACT)
-    return out.astype(dtype)
 

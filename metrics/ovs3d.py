@@ -20,8 +20,9 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from gsbench.errors import InputError
+from gsbench.resize import resize_nearest
 
-from ._common import as_mask, finite_float, mean_or_none, pixel_text_cosines, resize_nearest, to_numpy
+from ._common import as_mask, finite_float, mean_or_none, pixel_text_cosines, to_numpy
 from .segmentation import BOUNDARY_DILATION_RATIO, boundary_iou, iou
 
 OVS3D_IMPL = "3dovs/argmax-cos/v1"

@@ -24,10 +24,10 @@ from gsbench.priors import depth as D
 from gsbench.priors import masks as M
 from gsbench.priors import prepare_priors
 from gsbench.priors import segmenter as S
-from gsbench.priors import warp as W
 from gsbench.priors.features import gt_class_map
 from gsbench.priors.propagation import NEW_OBJECT_RULES
 from gsbench.priors.quality import target_classes, target_quality
+from gsbench.resize import resize_area, resize_nearest
 
 log = logging.getLogger(__name__)
 VIEW_INDEX = (4, 5, 6)        # three neighbouring training views
@@ -134,8 +134,8 @@ def main(argv: list[str] | None = None) -> None:
             return
         VIEWS = [sorted(scene.train_ids)[k] for k in VIEW_INDEX]
         gt = {v: M.gt_instance_map(scene, v, size) for v in VIEWS}
-        img = {v: W.resize_image(np.asarray(scene.image(v), np.float32), size) for v in VIEWS}
-        z = {v: W.resize_nearest(np.asarray(scene.gt_depth(v), np.float32), size) for v in VIEWS}
+        img = {v: resize_area(np.asarray(scene.image(v), np.float32), *size) for v in VIEWS}
+        z = {v: resize_nearest(np.asarray(scene.gt_depth(v), np.float32), *size) for v in VIEWS}
         u8 = {v: np.clip(np.rint(img[v] * 255), 0, 255).astype(np.uint8) for v in VIEWS}
 
         def seg_row(label, knobs):

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gsbench.priors import warp as W
+from gsbench.resize import resize_nearest
 from gsbench.results import DEPTH_METRICS
 
 from .block import Block, to_numpy
@@ -42,7 +42,7 @@ def depth_metrics(method, scene, ids: list[int], cams: list) -> Block:
     vals = []
     for i, cam in zip(ids, cams):
         d = to_numpy(method.render(cam).depth)
-        z = W.resize_nearest(np.asarray(scene.gt_depth(i), dtype=np.float32), (cam.width, cam.height))
+        z = resize_nearest(np.asarray(scene.gt_depth(i), dtype=np.float32), cam.width, cam.height)
         vals.append(depth_absrel(d, z))
     out.put_mean("depth_absrel", vals, DEPTH_IMPL, names)
     return out

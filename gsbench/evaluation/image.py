@@ -2,7 +2,7 @@
 
 Like 3DGS's metrics script, all of them are computed on the 8-bit values a saved render holds
 (`quantize_uint8` of the render and of the GT); the ids say so. The GT is brought to the render's
-size as training loads it (PIL bicubic, `gsbench.datasets.imageio.resize_rgb`).
+size as training loads it (PIL bicubic, `gsbench.resize.resize_rgb`).
 `ssim` and `lpips` are the 3DGS forms that 3DGS-family papers report (zero-padded SSIM; LPIPS fed
 the [0, 1] images); `ssim_valid` and `lpips_package` keep the valid-region SSIM and the LPIPS
 package's [-1, 1] input convention. Each id names its form.
@@ -13,11 +13,11 @@ import logging
 
 import numpy as np
 
-from gsbench.datasets.imageio import resize_rgb
 from gsbench.errors import InputError
 from gsbench.metrics import image as MI
 from gsbench.metrics import perceptual as MP
 from gsbench.metrics import timing
+from gsbench.resize import resize_rgb
 
 from .block import Block, to_numpy
 from .frames import size_text, view_name
@@ -26,11 +26,6 @@ log = logging.getLogger(__name__)
 QUANTIZED = "+uint8-input"
 SSIM_FORMS = {"ssim": "zeropad", "ssim_valid": "valid"}
 LPIPS_FORMS = {"lpips": "3dgs-[0,1]", "lpips_package": "lpips-[-1,1]"}
-
-
-def resize_image(img: np.ndarray, width: int, height: int) -> np.ndarray:
-    """A GT image at the evaluation size, resized as training loads it (3DGS's PIL bicubic on 8 bits)."""
-    return resize_rgb(np.asarray(img, np.float32)[..., :3], width, height)
 
 
 def image_metrics(method, scene, ids: list[int], cams: list, config: dict, progress: bool = False) -> Block:
@@ -49,7 +44,7 @@ def image_metrics(method, scene, ids: list[int], cams: list, config: dict, progr
     lpips_impls: dict[str, str] = {}
     for i, cam in tqdm(list(zip(ids, cams)), desc="eval views", disable=not progress):
         pred = MI.quantize_uint8(np.clip(to_numpy(method.render(cam).rgb), 0.0, 1.0))
-        gt = MI.quantize_uint8(resize_image(scene.image(i), cam.width, cam.height))
+        gt = MI.quantize_uint8(resize_rgb(np.asarray(scene.image(i), np.float32), cam.width, cam.height))
         vals["psnr"].append(MI.psnr(pred, gt))
         for name, border in SSIM_FORMS.items():
             vals[name].append(MI.ssim(pred, gt, border=border))

@@ -11,7 +11,7 @@ import numpy as np
 from gsbench.datasets.ovs import label_masks as rasterise
 from gsbench.datasets.ovs import read_lerf_label
 from gsbench.errors import InputError
-from gsbench.metrics import resize_nearest
+from gsbench.resize import resize_nearest
 
 
 def read_label_file(path: Path) -> tuple[int, int, list]:

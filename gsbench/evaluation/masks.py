@@ -20,9 +20,9 @@ import numpy as np
 from gsbench import rundir
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError
-from gsbench.metrics import NEAREST_IMPL, resize_nearest
 from gsbench.metrics import segmentation as M
 from gsbench.metrics.ovs3d import PIXEL_ACC_IMPL, pixel_accuracy
+from gsbench.resize import NEAREST_IMPL, resize_nearest
 from gsbench.results import run_results
 from gsbench.store import write_json_atomic
 

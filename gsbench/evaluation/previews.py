@@ -11,16 +11,15 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from gsbench.metrics import image as MI
-from gsbench.metrics import lerf, ovs3d, resize_nearest
+from gsbench.metrics import lerf, ovs3d
 from gsbench.previews import remove_previews, write_previews
+from gsbench.resize import resize_area, resize_nearest, resize_rgb
 
 from .block import to_numpy
 from .frames import segmentation_camera, view_name
-from .image import resize_image
 from .labels import class_masks, scene_label_masks
 from .removal import REMOVAL_IMPL, removal_targets, view_removal_metrics
 
@@ -44,8 +43,7 @@ def pick_frames(sets: dict[str, list[int]], n: int) -> list[tuple[int, str]]:
 
 def _to_uint8(a: np.ndarray, w: int, h: int) -> np.ndarray:
     a = np.clip(a, 0.0, 1.0).astype(np.float32)
-    if a.shape[:2] != (h, w):
-        a = cv2.resize(a, (w, h), interpolation=cv2.INTER_AREA)
+    a = resize_area(a, w, h)
     return np.floor(a * 255.0 + 0.5).astype(np.uint8)
 
 
@@ -112,7 +110,7 @@ def frame_preview(method, scene, i: int, protocol: str, frame_set: str, config: 
     out = method.render(cam)
     rgb = np.clip(to_numpy(out.rgb), 0.0, 1.0)
     depth, alpha = to_numpy(out.depth).astype(np.float32), to_numpy(out.alpha).astype(np.float32)
-    gt = resize_image(scene.image(i), cam.width, cam.height)
+    gt = resize_rgb(np.asarray(scene.image(i), np.float32), cam.width, cam.height)
     w, h = _preview_size(cam.width, cam.height, max_width)
     entry = {"key": f"{protocol}_{Path(view_name(scene, i)).stem}", "protocol": protocol,
              "view": view_name(scene, i), "frame_set": frame_set, "scored_size": [cam.width, cam.height],
@@ -131,10 +129,9 @@ def frame_preview(method, scene, i: int, protocol: str, frame_set: str, config: 
             entry["semantic_reason"] = "the label file holds no query"
     gt_depth = scene.gt_depth(i)
     gt_depth = (np.zeros((0, 0), np.float16) if gt_depth is None else
-                cv2.resize(np.nan_to_num(np.asarray(gt_depth, np.float32)), (w, h),
-                           interpolation=cv2.INTER_NEAREST).astype(np.float16))
+                resize_nearest(np.nan_to_num(np.asarray(gt_depth, np.float32)), w, h).astype(np.float16))
     arrays = {"render": _to_uint8(rgb, w, h), "gt": _to_uint8(gt, w, h), "gt_depth": gt_depth,
-              "depth": cv2.resize(depth, (w, h), interpolation=cv2.INTER_NEAREST).astype(np.float16),
+              "depth": resize_nearest(np.asarray(depth, np.float32), w, h).astype(np.float16),
               "alpha": _to_uint8(alpha, w, h),
               "pred": _shrink_masks(preds, w, h),
               "gt_masks": _shrink_masks(gts, w, h)}
@@ -159,7 +156,7 @@ def removal_previews(method, scene, ids: list[int], cams: list, config: dict, n:
                 continue
             obj = resize_nearest(np.asarray(inst_map, np.int32) == inst, cam.width, cam.height)
             if obj.any():
-                shown.append((i, cam, obj, resize_image(gt_rm, cam.width, cam.height)))
+                shown.append((i, cam, obj, resize_rgb(np.asarray(gt_rm, np.float32), cam.width, cam.height)))
             if len(shown) == n:
                 break
         if not shown:

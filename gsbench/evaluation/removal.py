@@ -6,12 +6,11 @@ import math
 
 import numpy as np
 
-from gsbench.metrics import resize_nearest
 from gsbench.metrics.image import quantize_uint8
+from gsbench.resize import resize_nearest, resize_rgb
 from gsbench.results import REMOVAL_METRICS
 
 from .block import Block, to_numpy
-from .image import resize_image
 
 REMOVAL_IMPL = "removal/residual-absdiff0.1+psnr-outside/v1"
 REMOVAL_RESIDUAL_TAU = 0.1   # an object pixel is "residual" if mean |RGB - GT without object| > this
@@ -74,7 +73,7 @@ def removal(method, scene, ids: list[int], cams: list, config: dict) -> Block:
             obj = resize_nearest(np.asarray(inst_map, np.int32) == inst, cam.width, cam.height)
             if not obj.any():
                 continue   # object not visible in this view: nothing to measure
-            gt_rm = resize_image(gt_rm, cam.width, cam.height)
+            gt_rm = resize_rgb(np.asarray(gt_rm, np.float32), cam.width, cam.height)
             pred = np.clip(to_numpy(removed.render(cam).rgb), 0.0, 1.0)
             res, ps = view_removal_metrics(pred, gt_rm, obj)
             residuals.append(res)

@@ -22,7 +22,8 @@ import numpy as np
 from gsbench.datasets import scene_fingerprint
 from gsbench.store import read_json, write_json_atomic
 
-CACHE_VERSION = 1
+# 2: GT masks, classes and depth reach the priors' size by PIL-NEAREST centre sampling (gsbench.resize)
+CACHE_VERSION = 2
 
 
 def _canonical(obj: Any) -> Any:

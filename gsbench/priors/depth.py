@@ -40,6 +40,7 @@ from gsbench.device import default_device
 from gsbench.errors import InputError
 from gsbench.priors import warp as W
 from gsbench.priors.weights import require_weights
+from gsbench.resize import resize_nearest
 
 DEPTH_PROVIDERS = ("gt", "sparse", "depth-anything", "none")
 DEPTH_KINDS = ("disparity", "depth", "metric")
@@ -188,7 +189,7 @@ def compute_depth(scene, depth_cfg: Mapping, view_ids: Sequence[int], size: tupl
                              "(use sparse or depth-anything)")
         distortion = distortion_of(depth_cfg)
         for v in bar(view_ids):
-            z = W.resize_nearest(np.asarray(scene.gt_depth(v), dtype=np.float32), size)
+            z = resize_nearest(np.asarray(scene.gt_depth(v), dtype=np.float32), *size)
             vals, valid = gt_disparity_prior(z, view_rng(seed, v, "gt-depth"), distortion)
             out[v] = DepthPrior(vals, valid, "disparity", pid)
     elif p == "sparse":

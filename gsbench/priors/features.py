@@ -26,8 +26,8 @@ from gsbench.device import default_device
 from gsbench.errors import InputError
 from gsbench.priors import clipspace as C
 from gsbench.priors.labels import label_view
-from gsbench.priors.warp import resize_nearest
 from gsbench.priors.weights import require_weights
+from gsbench.resize import resize_nearest
 
 FEATURE_DIM = C.DIM
 CANONICAL_NEGATIVES = C.CANONICAL_NEGATIVES
@@ -84,9 +84,9 @@ def named_class_map(scene, view: int, size: tuple[int, int]) -> tuple[np.ndarray
     feature, hence no semantic target."""
     if scene.has_semantics:
         c = scene.gt_classes(view)
-        return (None if c is None else resize_nearest(np.asarray(c).astype(np.int64), size)), list(scene.class_names)
+        return (None if c is None else resize_nearest(np.asarray(c).astype(np.int64), *size)), list(scene.class_names)
     if scene.has_instances and scene.instance_classes and scene.class_names:
-        inst = resize_nearest(np.asarray(scene.gt_instances(view)).astype(np.int64), size)
+        inst = resize_nearest(np.asarray(scene.gt_instances(view)).astype(np.int64), *size)
         lut = {int(k): int(c) for k, c in scene.instance_classes.items()}
         keys = np.array(sorted(lut), dtype=np.int64)
         vals = np.array([lut[k] for k in keys], dtype=np.int64)

@@ -24,7 +24,7 @@ import numpy as np
 
 from gsbench.datasets.ovs import polygons_to_mask
 from gsbench.errors import InputError
-from gsbench.priors.warp import resize_nearest
+from gsbench.resize import resize_nearest
 
 COMPONENT_STRIDE = 10_000
 SOURCE_3DOVS = "3dovs-class-components"
@@ -95,7 +95,7 @@ def _lerf_view(scene, view: int, size: tuple[int, int]) -> LabelledView | None:
         rank[k] = r + 1
         if r >= COMPONENT_STRIDE:
             raise InputError(f"view {view}: more than {COMPONENT_STRIDE - 1} label objects of {o.category!r}")
-        masks.append(resize_nearest(polygons_to_mask(o.polygons, lh, lw), size))
+        masks.append(resize_nearest(polygons_to_mask(o.polygons, lh, lw), *size))
         ids.append((k * COMPONENT_STRIDE + r, k))
     W, H = size
     seg = np.full((H, W), -1, np.int32)
@@ -113,7 +113,7 @@ def label_view(scene, view: int, size: tuple[int, int]) -> LabelledView | None:
         c = scene.gt_classes(view)
         if c is None:
             return None
-        cls = resize_nearest(np.asarray(c).astype(np.int32), size)
+        cls = resize_nearest(np.asarray(c).astype(np.int32), *size)
         return LabelledView(_components(cls, len(scene.class_names)), cls, list(scene.class_names))
     if src == SOURCE_LERF:
         return _lerf_view(scene, view, size)

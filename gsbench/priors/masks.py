@@ -24,8 +24,8 @@ from tqdm.auto import tqdm
 
 from gsbench.device import default_device
 from gsbench.errors import InputError
-from gsbench.priors.warp import resize_nearest
 from gsbench.priors.weights import require_weights
+from gsbench.resize import resize_nearest
 
 SIM_VERSION = 2
 
@@ -35,7 +35,7 @@ def gt_instance_map(scene, view: int, size: tuple[int, int]) -> np.ndarray:
     inst = scene.gt_instances(view)
     if inst is None:
         raise InputError(f"{scene.path}: scene has no GT instances (needed by priors.masks.provider=gt|simulated)")
-    return resize_nearest(np.asarray(inst).astype(np.int32), size)
+    return resize_nearest(np.asarray(inst).astype(np.int32), *size)
 
 
 # --------------------------------------------------------------------------------------- SAM2

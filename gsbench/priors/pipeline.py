@@ -32,6 +32,7 @@ from gsbench.priors import warp as W
 from gsbench.priors.cache import PriorCache, cache_key, scene_content_hash
 from gsbench.priors.features import FeatureProvider, TextAlignedFeatures, get_feature_provider
 from gsbench.priors.ordering import ORDERINGS, camera_centers, order_views
+from gsbench.resize import resize_area, resize_nearest
 
 MASK_PROVIDERS = ("simulated", "gt", "sam2")
 PROPAGATORS = ("flow", "reproject")
@@ -88,7 +89,7 @@ class _Images:
 
     def __getitem__(self, v: int) -> np.ndarray:
         if v not in self._d:
-            self._d[v] = W.resize_image(np.asarray(self.scene.image(v), dtype=np.float32), self.size)
+            self._d[v] = resize_area(np.asarray(self.scene.image(v), dtype=np.float32), *self.size)
         return self._d[v]
 
     def all(self, views):
@@ -98,7 +99,7 @@ class _Images:
 def _gt_depths(scene, views, size):
     depths, valids = {}, {}
     for v in views:
-        z = W.resize_nearest(np.asarray(scene.gt_depth(v), dtype=np.float32), size)
+        z = resize_nearest(np.asarray(scene.gt_depth(v), dtype=np.float32), *size)
         depths[v] = z
         valids[v] = np.isfinite(z) & (z > W.NEAR)
     return depths, valids

@@ -5,32 +5,11 @@ is at (x + 0.5, y + 0.5).
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from gsbench.camera import Camera
 
 NEAR = 1e-6
-
-
-def resize_image(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Resize an image to `size` = (W, H) with area averaging (the training-resolution rule)."""
-    W, H = size
-    if img.shape[1] == W and img.shape[0] == H:
-        return img
-    return cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA)
-
-
-def resize_nearest(arr: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Resize a label / class / depth map to `size` = (W, H) without mixing values."""
-    W, H = size
-    if arr.shape[1] == W and arr.shape[0] == H:
-        return arr
-    a = np.asarray(arr)
-    # OpenCV's resize does not take int32/bool for every build: index directly (same as NEAREST).
-    ys = np.minimum((np.arange(H) + 0.5) * a.shape[0] / H, a.shape[0] - 1).astype(np.int64)
-    xs = np.minimum((np.arange(W) + 0.5) * a.shape[1] / W, a.shape[1] - 1).astype(np.int64)
-    return a[ys[:, None], xs[None, :]]
 
 
 def camera_at(cam: Camera, size: tuple[int, int]) -> Camera:

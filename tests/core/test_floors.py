@@ -40,6 +40,7 @@ FLOORS: dict[str, int] = {
     "gsbench.environment": 0,      # machine facts and peak memory
     "gsbench.runlock": 0,          # one writer per run folder
     "gsbench.device": 0,           # the one device rule (train.device, a model prior's default)
+    "gsbench.resize": 0,           # every resize: RGB as 3DGS, nearest as PIL, area
     "gsbench.rundir": 0,           # the run folder's file names, status reader beside its writer
     # 1: what a method is built from
     "gsbench.render": 1,

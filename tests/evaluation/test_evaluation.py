@@ -284,12 +284,12 @@ def test_gt_and_training_images_are_resized_as_3dgs_loads_them(lerf_scene):
     import cv2
     from PIL import Image
 
-    from gsbench.evaluation.image import resize_image
     from gsbench.methods.base import load_views
+    from gsbench.resize import resize_rgb
     path = lerf_scene.image_paths[0]
     with Image.open(path) as im:
         ref = np.asarray(im.convert("RGB").resize((32, 24), Image.BICUBIC), np.float32) / 255.0
-    ours = resize_image(lerf_scene.image(0), 32, 24)
+    ours = resize_rgb(np.asarray(lerf_scene.image(0), np.float32), 32, 24)
     assert ours.shape == (24, 32, 3)
     np.testing.assert_allclose(ours, ref, atol=1e-7)
     area = cv2.resize(np.asarray(lerf_scene.image(0), np.float32), (32, 24), interpolation=cv2.INTER_AREA)
