@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from gsbench.methods.gaussiands.paper import LATENT_DIM_MIOU
 from gsbench.reports.data import Results, same
 from gsbench.reports.plots import _save, plt
 from gsbench.reports.spec import AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE, NOISE_LABELS, metric_spec
@@ -38,7 +39,7 @@ DOSES: list[Dose] = [
          log_x=True),
     Dose("lambda_grid", AX_LAMBDAS[2], "miou", "λ_sem", 5.0, paper_note="paper default λ_sem = 5"),
     Dose("depth_noise", AX_NOISE_SEVERITY, "psnr", "noise severity", split=AX_NOISE_TYPE),
-    Dose("latent_dim", AX_LATENT, "miou", "latent dimension d", 3.0, ((3, 61.42), (16, 62.83), (32, 61.32)),
+    Dose("latent_dim", AX_LATENT, "miou", "latent dimension d", 3.0, tuple(LATENT_DIM_MIOU.items()),
          "paper (waldo_kitchen): d = 3, 16, 32; default d = 3"),
     Dose("control_depth", AX_LAMBDAS[0], "psnr", "λ_depth (few-view control)", 0.01,
          paper_note="paper default λ_depth = 0.01"),
