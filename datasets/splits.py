@@ -6,6 +6,7 @@ leaves no view for PSNR / SSIM / LPIPS (the evaluation then skips them with a re
 """
 from __future__ import annotations
 
+from gsbench.config import setting
 from gsbench.errors import InputError
 
 HOLDOUT_CHOICES = ("every-8", "none")
@@ -13,7 +14,7 @@ HOLDOUT_CHOICES = ("every-8", "none")
 
 def split_ids(scene, config: dict) -> tuple[list[int], list[int]]:
     """(trained view ids, held-out view ids) of a run with this config."""
-    holdout = (config.get("train") or {}).get("holdout", "every-8")
+    holdout = setting(config, "train.holdout")
     if holdout not in HOLDOUT_CHOICES:
         raise InputError(f"train.holdout must be one of {', '.join(HOLDOUT_CHOICES)}, got {holdout!r}")
     if holdout == "none":

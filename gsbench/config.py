@@ -200,6 +200,21 @@ def check_key(key: str, value: Any, where: str = "config") -> Any:
     return check_value(key, value, _default_leaves(), where)
 
 
+def setting(config: Mapping, key: str) -> Any:
+    """The config's value of a dotted key, else default.yaml's (a config written before the key existed,
+    e.g. an older run folder's config.json): the one place a default is read, so no call site restates
+    it. An unknown key is a KeyError (a programming error, not bad input)."""
+    try:
+        return get_dotted(config, key)
+    except KeyError:
+        return copy.deepcopy(get_dotted(_default_tree(), key))
+
+
+@functools.lru_cache(maxsize=1)
+def _default_tree() -> dict:
+    return default_tree()
+
+
 @functools.lru_cache(maxsize=1)
 def _default_leaves() -> dict[str, Any]:
     """default.yaml's leaves, read once (check_value only reads them)."""
@@ -304,6 +319,7 @@ __all__ = [
     "load_config",
     "load_tree",
     "run_id",
+    "setting",
     "config_key",
     "canonical",
     "parse_overrides",

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import torch
 
+from gsbench.config import setting
 from gsbench.errors import InputError
 
 CPU_ONLY_BACKENDS = ("cpu",)    # backends that render CPU tensors only: `auto` devices follow them
@@ -24,7 +25,7 @@ def resolve_device(config: dict) -> torch.device:
     CPU only (backend: cpu, as the CPU presets pin it), else cuda:0 when CUDA is available, else the CPU.
 
     Asking for CUDA on a machine without it is a one-line InputError (no silent CPU fallback)."""
-    want = str((config.get("train") or {}).get("device", "auto") or "auto").strip().lower()
+    want = str(setting(config, "train.device") or "auto").strip().lower()
     if want == "auto":
         if str(config.get("backend") or "auto") in CPU_ONLY_BACKENDS:
             return torch.device("cpu")

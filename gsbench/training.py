@@ -29,6 +29,7 @@ import torch
 from tqdm import tqdm
 
 from gsbench import rundir
+from gsbench.config import setting
 from gsbench.errors import InputError
 from gsbench.evaluation import segmentation_metrics
 from gsbench.gaussians import GaussianField
@@ -176,7 +177,7 @@ def _segmentation(method, scene, views, config: dict) -> Optional[Callable[[Gaus
         metrics, skipped = segmentation_metrics(probe, scene, ids, cams, config)
         out = {k: float(metrics[k]) for k in ("miou_3dovs", "miou_lerf") if metrics.get(k) is not None}
         if out:
-            out["query_mode"] = (config.get("query") or {}).get("mode", "encode")
+            out["query_mode"] = setting(config, "query.mode")
         elif skipped:   # e.g. the eval views carry no segmentation GT
             out["miou_skipped"] = "; ".join(f"{k}: {v}" for k, v in sorted(skipped.items()))
         return out

@@ -28,6 +28,7 @@ import numpy as np
 import torch
 
 from gsbench.camera import Camera, training_size
+from gsbench.config import setting
 from gsbench.config_keys import QUERY_MODES
 from gsbench.datasets.splits import split_ids
 from gsbench.device import resolve_device
@@ -61,7 +62,7 @@ def removal_mask(latents: torch.Tensor, query: torch.Tensor, threshold: float) -
 
 
 class Method:
-    """Shared implementation; subclasses implement `fit`."""
+    """Shared implementation; subclasses implement `train_phases` (the harness runs the phases)."""
 
     name = "base"
 
@@ -114,7 +115,7 @@ class Method:
     def _background(self) -> torch.Tensor:
         """train.background on the field's device, made once per device and value (not per render:
         on CUDA that would be a host-to-device copy inside the FPS timing)."""
-        bg = (self.config.get("train", {}) or {}).get("background") or [0.0, 0.0, 0.0]
+        bg = setting(self.config, "train.background") or [0.0, 0.0, 0.0]
         key = (tuple(float(x) for x in bg), self.device)
         if key not in self._background_cache:
             self._background_cache[key] = torch.tensor(bg, dtype=torch.float32, device=self.device)
@@ -182,7 +183,7 @@ class Method:
         """Object removal: a copy without the Gaussians whose latent cosine with the encoded query > threshold."""
         if not self.has_semantics:
             raise ValueError(f"method {self.name}: object removal needs semantic latents (this run has none)")
-        thr = float(self.config.get("removal", {}).get("threshold", 0.9) if threshold is None else threshold)
+        thr = float(setting(self.config, "removal.threshold") if threshold is None else threshold)
         q = self.embed_text([query], "encode")[0]
         fld = self._require_field()
         drop = removal_mask(fld.features, q, thr)

@@ -7,6 +7,7 @@ from typing import Callable, Optional
 import torch
 
 from gsbench import rundir
+from gsbench.config import setting
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
@@ -20,7 +21,7 @@ def resolve_render_backend(config: dict, device: Optional[torch.device] = None) 
     """The concrete backend id for the training device (`auto` -> gsplat on CUDA, cpu on the CPU);
     checked importable now, not mid-run. `device` defaults to the config's `train.device`."""
     dev = resolve_device(config) if device is None else torch.device(device)
-    return resolve_backend_for(config.get("backend", "auto"), dev)
+    return resolve_backend_for(setting(config, "backend"), dev)
 
 
 def cache_dir_for(config: dict, run_dir: Path) -> Path:

@@ -7,6 +7,7 @@ from typing import Iterable
 
 import torch
 
+from gsbench.config import setting
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.render.gsplat_ext import NEEDS_BUILD, build_gsplat_extension, gsplat_status
@@ -67,7 +68,7 @@ def prebuild_for(configs: Iterable[dict]) -> bool:
         return False
     for cfg in configs:
         try:
-            if resolve_backend_for(cfg.get("backend", "auto"), resolve_device(cfg)) == "gsplat":
+            if resolve_backend_for(setting(cfg, "backend"), resolve_device(cfg)) == "gsplat":
                 build_gsplat_extension()
                 return True
         except InputError:      # the cell fails with its own error line when it runs

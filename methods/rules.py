@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+from gsbench.config import setting
 from gsbench.datasets.splits import split_ids
 from gsbench.priors.labels import SOURCE_TEXT, label_source, labelled_views
 
@@ -53,7 +54,7 @@ def semantic_source(cfg: dict, scene) -> tuple[bool, str]:
         train, _ = split_ids(scene, cfg)
         lab = labelled_views(scene)
         if not set(train) & set(lab):
-            holdout = (cfg.get("train") or {}).get("holdout", "every-8")
+            holdout = setting(cfg, "train.holdout")
             return False, (f"the scene's {SOURCE_TEXT[labels]} are on {len(lab)} views, none of them trained on "
                            f"(train.holdout={holdout}): no view to take semantic targets from")
     return True, ""

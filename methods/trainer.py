@@ -34,6 +34,7 @@ import torch
 
 from gsbench import rundir
 from gsbench.camera import Camera
+from gsbench.config import setting
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
 from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
@@ -175,10 +176,10 @@ class Trainer:
         lrs = {"means": lr["position_init"] * self.extent}
         for k, key in LR_KEYS.items():
             lrs[k] = lr[key]
-        lrs[SH_REST] = float(lr["color"]) * float(lr.get("color_rest_factor", 0.05))
+        lrs[SH_REST] = float(lr["color"]) * float(setting(cfg, "train.lr.color_rest_factor"))
         tensors = {k: v.to(self.device) for k, v in field.tensors().items() if v is not None}
         self.sh_max = field.sh_degree or 0
-        self.sh_every = int(self.tcfg.get("sh_increase_every", 1000) or 0)
+        self.sh_every = int(setting(cfg, "train.sh_increase_every") or 0)
         if self.sh_max > 0:
             c = tensors.pop("colors")
             tensors["colors"], tensors[SH_REST] = c[:, :1].contiguous(), c[:, 1:].contiguous()
@@ -252,7 +253,7 @@ class Trainer:
     def _update_lr(self) -> float:
         lr = self.tcfg["lr"]
         v = expon_lr(self.step, lr["position_init"] * self.extent, lr["position_final"] * self.extent,
-                     int(lr["position_max_steps"]), int(lr.get("position_delay_steps", 0) or 0),
+                     int(lr["position_max_steps"]), int(setting(self.cfg, "train.lr.position_delay_steps") or 0),
                      float(lr["position_delay_mult"]))
         g = self.ps.group("means")
         if g is not None:

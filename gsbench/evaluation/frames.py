@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from gsbench.camera import training_size
+from gsbench.config import setting
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
 from gsbench.results import FRAME_SETS
@@ -66,11 +67,10 @@ OVS3D_REFERENCE_DOWNSAMPLE = 8     # the 3D-OVS reference scores at int(W / 8) x
 
 def eval_settings(config: dict) -> tuple[str, int | None]:
     """(eval.resolution, eval.ovs3d_downsample) checked; the factor None means the reference's rule."""
-    ev = config.get("eval") or {}
-    res = ev.get("resolution", "reference")
+    res = setting(config, "eval.resolution")
     if res not in RESOLUTIONS:
         raise InputError(f"eval.resolution must be one of {', '.join(RESOLUTIONS)}, got {res!r}")
-    down = ev.get("ovs3d_downsample")
+    down = setting(config, "eval.ovs3d_downsample")
     if down is not None and (isinstance(down, bool) or not isinstance(down, int) or down < 1):
         raise InputError(f"eval.ovs3d_downsample must be null or an integer >= 1, got {down!r}")
     return res, down

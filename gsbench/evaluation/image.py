@@ -13,6 +13,7 @@ import logging
 
 import numpy as np
 
+from gsbench.config import setting
 from gsbench.errors import InputError
 from gsbench.metrics import image as MI
 from gsbench.metrics import perceptual as MP
@@ -37,7 +38,7 @@ def image_metrics(method, scene, ids: list[int], cams: list, config: dict, progr
     if not ids:
         out.skip(names_all, "no held-out view (train.holdout: none trains on every view)")
         return out
-    net = (config.get("eval") or {}).get("lpips_net", "vgg")
+    net = setting(config, "eval.lpips_net")
     names = [view_name(scene, i) for i in ids]
     vals: dict[str, list] = {k: [] for k in names_all}
     lpips_reason = None
@@ -80,14 +81,14 @@ def fps(method, cams: list, config: dict) -> Block:
     if not cams:
         out.skip(("fps",), "no camera to time")
         return out
-    ev = config.get("eval") or {}
     state = {"k": 0}
 
     def render_next() -> None:   # cycles through the views
         method.render(cams[state["k"] % len(cams)])
         state["k"] += 1
 
-    res = timing.time_fps(render_next, warmup=int(ev.get("fps_warmup", 3)), repeats=int(ev.get("fps_repeats", 10)),
+    res = timing.time_fps(render_next, warmup=int(setting(config, "eval.fps_warmup")),
+                          repeats=int(setting(config, "eval.fps_repeats")),
                           device=getattr(method, "device", None))
     out.put("fps", res["fps"], res["impl"], "timer returned no value")
     out.timings.update(render_ms=res["median_ms"], fps=res["fps"], fps_sync=res["sync"])

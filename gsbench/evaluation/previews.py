@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gsbench.config import setting
 from gsbench.metrics import image as MI
 from gsbench.metrics import lerf, ovs3d
 from gsbench.previews import remove_previews, write_previews
@@ -72,7 +73,7 @@ def _semantics_3dovs(method, scene, i: int, cam, config: dict, mode: str, feats:
     text = to_numpy(method.embed_text(classes, mode))
     gt = class_masks(scene, i, classes, cam.width, cam.height) or {}
     pred = ovs3d.ovs3d_predict(feats, text)
-    ratio = float((config.get("eval") or {}).get("boundary_dilation_ratio", 0.02))
+    ratio = float(setting(config, "eval.boundary_dilation_ratio"))
     m = ovs3d.ovs3d_view_metrics(pred, gt, classes, dilation_ratio=ratio)
     queries = [{"query": c, "iou": m["iou"][c], "biou": m["biou"][c], "localized": None, "reason": None}
                for c in classes]
@@ -86,7 +87,7 @@ def _semantics_lerf(method, scene, i: int, cam, config: dict, mode: str, feats: 
     names = list(masks)
     if not names:
         return [], [], [], {}
-    kernels = lerf.lerf_kernels(cam.width, (config.get("eval") or {}).get("lerf_kernels", "auto"))
+    kernels = lerf.lerf_kernels(cam.width, setting(config, "eval.lerf_kernels"))
     neg = to_numpy(method.embed_text(list(lerf.CANONICAL_NEGATIVES), mode))
     rel = lerf.lerf_relevancy(feats, to_numpy(method.embed_text(names, mode)), neg)
     pairs = [lerf.LerfPair(view_name(scene, i), q, rel[k], masks[q], boxes[q]) for k, q in enumerate(names)]
@@ -147,7 +148,7 @@ def removal_previews(method, scene, ids: list[int], cams: list, config: dict, n:
         return [], {}, "scene has no removal ground truth (synthetic scenes only)"
     if method.embed_text(["object"], "encode") is None:
         return [], {}, f"method {config.get('method')} has no semantic field to select objects"
-    threshold = float((config.get("removal") or {}).get("threshold", 0.9))
+    threshold = float(setting(config, "removal.threshold"))
     for name, inst in removal_targets(scene):
         shown = []
         for i, cam in zip(ids, cams):
@@ -181,8 +182,7 @@ def removal_previews(method, scene, ids: list[int], cams: list, config: dict, n:
 
 def preview_settings(config: dict) -> tuple[int, int]:
     """(frames per protocol, max width) from eval.previews / eval.preview_width."""
-    ev = config.get("eval") or {}
-    return int(ev.get("previews", DEFAULT_FRAMES)), int(ev.get("preview_width", DEFAULT_WIDTH))
+    return int(setting(config, "eval.previews")), int(setting(config, "eval.preview_width"))
 
 
 def save_previews(run_dir: Path, method, scene, protocols: list[str], sets: dict, rec_ids: list[int],

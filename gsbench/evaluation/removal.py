@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from gsbench.config import setting
 from gsbench.metrics.image import quantize_uint8
 from gsbench.resize import resize_nearest, resize_rgb
 from gsbench.results import REMOVAL_METRICS
@@ -60,7 +61,7 @@ def removal(method, scene, ids: list[int], cams: list, config: dict) -> Block:
     if method.embed_text(["object"], "encode") is None:
         out.skip(REMOVAL_METRICS, f"method {config.get('method')}: this run has no semantic field to select objects")
         return out
-    threshold = float((config.get("removal") or {}).get("threshold", 0.9))
+    threshold = float(setting(config, "removal.threshold"))
     residuals, psnrs, per_view = [], [], [[] for _ in ids]
     for name, inst in removal_targets(scene, out.notes):
         removed, n_pruned = method.remove(name, threshold)

@@ -16,6 +16,7 @@ from typing import Optional
 
 import numpy as np
 
+from gsbench.config import setting
 from gsbench.errors import InputError
 from gsbench.metrics import lerf, ovs3d
 from gsbench.results import FRAME_SET_SUFFIX, QUERY_MODES, SEG_BASES, seg_metric
@@ -137,7 +138,7 @@ def score_3dovs(method, scene, ids: list[int], config: dict, mode: str, configur
     if text is None:
         out.skip(every, f"method {config.get('method')} has no semantic field")
         return out
-    ratio = float((config.get("eval") or {}).get("boundary_dilation_ratio", 0.02))
+    ratio = float(setting(config, "eval.boundary_dilation_ratio"))
     if frames is None:
         frames = frame_outputs(method, scene, {"3dovs": ids}, config, (mode,))
     views, cams = [], []
@@ -183,7 +184,7 @@ def score_lerf(method, scene, ids: list[int], config: dict, mode: str, configure
     if neg is None:
         out.skip(every, f"method {config.get('method')} has no semantic field")
         return out
-    kmode = (config.get("eval") or {}).get("lerf_kernels", "auto")
+    kmode = setting(config, "eval.lerf_kernels")
     if frames is None:
         frames = frame_outputs(method, scene, {"lerf": ids}, config, (mode,))
     pairs, cams, kernels = [], [], None

@@ -23,6 +23,7 @@ from gsbench.methods.common import fit_priors, make_trainer, uses
 
 from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, expected_depth, normalised_depth,  # isort: skip
                                     reconstruction_loss, sem_loss, tv_loss)
+from gsbench.config import setting
 from gsbench.methods.gaussiands.spec import budget
 from gsbench.methods.residency import data_on, place
 from gsbench.methods.semantic import semantic_targets
@@ -92,7 +93,7 @@ class GaussianDS(Method):
         form = g["depth_formulation"]
         min_valid = int(g["min_valid_pixels"])
         tv_eps = float(g["tv_eps"])
-        ds_average = str(g.get("ds_average", "pixels"))
+        ds_average = str(setting(config, "gaussiands.ds_average"))
 
         def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
             # every value stays on the device: no host synchronisation per step (the trainer reads
