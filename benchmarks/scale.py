@@ -176,7 +176,7 @@ def _eval_one(load_run, run_dir: Path) -> str:
     from gsbench.evaluation.frames import frame_sets, train_camera, view_name
     from gsbench.evaluation.image import image_metrics
     from gsbench.evaluation.segmentation import query_mode, resolve_protocols, segmentation
-    from gsbench.results import seg_metric
+    from gsbench.metric_table import seg_metric
     method, config, scene = load_run(run_dir)
     fs = frame_sets(scene, config)
     i = fs.reconstruction[0]

@@ -33,7 +33,8 @@ import pandas as pd
 from gsbench import rundir
 from gsbench.config import config_key
 from gsbench.errors import InputError
-from gsbench.results import KNOWN_METRICS
+from gsbench.metric_table import KNOWN_METRICS
+from gsbench.results import check_shape
 from gsbench.store import read_json, write_bytes_atomic, write_text_atomic
 
 BASE_COLUMNS = [
@@ -41,8 +42,6 @@ BASE_COLUMNS = [
     "provider.depth", "provider.masks", "provider.features", "dropped",
 ]
 TAIL_COLUMNS = ["metric", "value", "metric_impl", "reason", "source", "config_key"]
-REQUIRED_KEYS = ("run_id", "method", "scene", "metrics")
-# Keys of the resolved config that differ between runs of one cell without changing the experiment.
 COLLECTED_PARQUET = "collected.parquet"
 COLLECTED_CSV = "collected.csv"
 
@@ -125,31 +124,15 @@ def _read_env(path: Path) -> dict:
 
 
 def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
-    if not isinstance(res, dict):
-        raise InputError(f"{path}: results.json must hold a JSON object, got {type(res).__name__}")
-    for key in REQUIRED_KEYS:
-        if key not in res:
-            raise InputError(f"{path}: missing key '{key}'")
+    check_shape(res, path)
     metrics = res.get("metrics") or {}
-    if not isinstance(metrics, dict):
-        raise InputError(f"{path}: 'metrics' must be an object")
     skipped = res.get("skipped") or {}
-    if not isinstance(skipped, dict):
-        raise InputError(f"{path}: 'skipped' must be an object")
     grid = res.get("grid") or {}
-    if not isinstance(grid, dict):
-        raise InputError(f"{path}: 'grid' must be an object")
     providers = res.get("providers") or {}
-    if not isinstance(providers, dict):
-        raise InputError(f"{path}: 'providers' must be an object")
     machine = res.get("machine") or {}
-    if not isinstance(machine, dict):
-        raise InputError(f"{path}: 'machine' must be an object")
     metric_impl = res.get("metric_impl") or {}
     status = str(res.get("status") or "done")
     seed = res.get("seed")
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
-        raise InputError(f"{path}: 'seed' must be an integer or null, got {seed!r}")
 
     base: dict[str, Any] = {
         "run_id": str(res["run_id"]),
@@ -188,8 +171,6 @@ def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
     present = set(metrics)
     for section in ("timings", "memory"):
         block = res.get(section) or {}
-        if not isinstance(block, dict):
-            raise InputError(f"{path}: '{section}' must be an object")
         for m, v in block.items():
             # descriptive entries (e.g. "fps_sync": "none (cpu, synchronous)") are not quantities
             if isinstance(v, (str, bool, dict, list)):

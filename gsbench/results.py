@@ -22,47 +22,13 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable, Optional
 
-from gsbench.config_keys import QUERY_MODES
+from gsbench.errors import InputError
+
+from gsbench.metric_table import (DEPTH_METRICS, IMAGE_METRICS, KNOWN_METRICS, ORDERING_METRICS,  # isort: skip
+                                  REMOVAL_METRICS, SEG_BASES, seg_metric)
 
 RESULTS_VERSION = 2
 STATUSES = ("done", "failed", "nonfinite")
-FRAME_SETS = ("reference", "held-out")
-FRAME_SET_SUFFIX = {"reference": "", "held-out": "_heldout"}
-
-# ssim / lpips: the 3DGS forms (zero-padded SSIM, LPIPS on [0, 1] inputs) that 3DGS-family papers report;
-# ssim_valid / lpips_package: the valid-region SSIM and the LPIPS package's [-1, 1] input convention.
-IMAGE_METRICS = ("psnr", "ssim", "lpips", "fps", "ssim_valid", "lpips_package")
-SEG_BASES = {"3dovs": ("miou", "mbiou", "pixel_acc", "pixel_acc_labelled"), "lerf": ("miou", "loc_acc")}
-MASK_FOLDER_METRICS = ("mbiou_lerf",)
-REMOVAL_METRICS = ("removal_residual", "removal_psnr_outside")
-DEPTH_METRICS = ("depth_absrel",)
-ORDERING_METRICS = ("ordering_adjacent_distance", "ordering_adjacent_mask_iou", "ordering_adjacent_mask_iou_strict",
-                    "ordering_adjacent_mask_iou_flow")
-TIMING_NAMES = ("train_s", "eval_s", "render_ms")
-MEMORY_NAMES = ("peak_rss_mb", "train_peak_rss_mb", "peak_cuda_mb", "train_peak_cuda_mb", "eval_peak_cuda_mb")
-
-
-def seg_metric(base: str, protocol: str, mode: Optional[str] = None, frame_set: str = "reference") -> str:
-    """Name of a segmentation metric, e.g. ("miou", "lerf", "decode", "held-out") -> miou_lerf_decode_heldout."""
-    if protocol not in SEG_BASES or base not in SEG_BASES[protocol]:
-        raise ValueError(f"no segmentation metric {base!r} for protocol {protocol!r}")
-    if mode is not None and mode not in QUERY_MODES:
-        raise ValueError(f"query mode must be one of {QUERY_MODES}, got {mode!r}")
-    return f"{base}_{protocol}" + (f"_{mode}" if mode else "") + FRAME_SET_SUFFIX[frame_set]
-
-
-def _seg_names() -> tuple[str, ...]:
-    return tuple(seg_metric(b, p, m, f) for p, bases in SEG_BASES.items() for b in bases
-                 for m in (None, *QUERY_MODES) for f in FRAME_SETS)
-
-
-#: every name `metrics` may hold, in report order
-METRIC_NAMES: tuple[str, ...] = (IMAGE_METRICS + _seg_names() + MASK_FOLDER_METRICS + REMOVAL_METRICS
-                                 + ORDERING_METRICS + DEPTH_METRICS)
-#: every quantity a collected row may carry (metrics, timings, memory)
-KNOWN_METRICS: frozenset[str] = frozenset(METRIC_NAMES + TIMING_NAMES + MEMORY_NAMES)
-
-
 def summarise(values: Iterable[Any], names: Optional[list[str]] = None) -> tuple[Optional[float], Optional[str]]:
     """(mean, None) of per-view values, or (None, reason) when any of them is missing or non-finite:
     a mean over the views that happened to work would be a different, unlabelled number."""
@@ -122,6 +88,26 @@ def failed_results(*, identity: dict, reason: str, machine: dict, timings: Optio
 
 IDENTITY_KEYS = ("run_id", "method", "scene", "scene_path", "seed", "study", "grid", "config", "providers",
                  "backend", "protocol", "protocols", "query_mode", "dropped")
+
+
+REQUIRED_KEYS = ("run_id", "method", "scene", "metrics")
+_OBJECTS = ("metrics", "skipped", "grid", "providers", "machine", "timings", "memory")
+
+
+def check_shape(res: Any, path: Any) -> None:
+    """The reader's check of what run_results / failed_results write: an object with the required
+    keys, its sections objects (or null), the seed an integer or null; an InputError naming `path`."""
+    if not isinstance(res, dict):
+        raise InputError(f"{path}: results.json must hold a JSON object, got {type(res).__name__}")
+    for key in REQUIRED_KEYS:
+        if key not in res:
+            raise InputError(f"{path}: missing key '{key}'")
+    for key in _OBJECTS:
+        if not isinstance(res.get(key) or {}, dict):
+            raise InputError(f"{path}: '{key}' must be an object")
+    seed = res.get("seed")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
+        raise InputError(f"{path}: 'seed' must be an integer or null, got {seed!r}")
 
 
 def _identity(identity: dict) -> dict:

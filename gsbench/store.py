@@ -12,16 +12,8 @@ Run folder (one per trained run, NerfBaselines-like, one JSON of results per run
   checkpoint.pt     GaussianField state + optimiser state + step (atomic)
   results.json      the schema, the metric names and the builders are in gsbench/results.py
 
-Study names and the grid axis keys they vary (grids in gsbench/grids/, tables in reports):
-  reconstruction     method (x scenes)
-  ordering           priors.ordering
-  depth_formulation  gaussiands.depth_formulation
-  loss_subsets       gaussiands.losses.depth, gaussiands.losses.tv, gaussiands.losses.ds
-  latent_dim         gaussiands.latent_dim (plus a method=vanilla reference cell)
-  lambda_grid        gaussiands.lambdas.depth / .tv / .sem / .ds
-  depth_noise        priors.depth.noise.type, priors.depth.noise.severity
-  control_*          the positive controls of the claims table (docs/grids.md): control_depth,
-                     control_depth_noise, control_ds, control_latent, control_sem
+Study names, the grid axis keys they vary, their labels and reference rows: the one studies table,
+gsbench/studies.py.
 """
 from __future__ import annotations
 

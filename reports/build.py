@@ -24,12 +24,13 @@ from gsbench.reports.ablations import (depth_formulation_table, latent_diff_tabl
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.claims import claims_table
 from gsbench.reports.controls import controls_table
-from gsbench.reports.data import MAIN_STUDIES, Results, is_null
+from gsbench.reports.data import Results, is_null
 from gsbench.reports.spec import STUDIES
 from gsbench.reports.studies import reconstruction_table, removal_table, semantic_table
 from gsbench.reports.sweeps import lambda_table, latent_dim_tables
 from gsbench.reports.table import Table
 from gsbench.store import write_text_atomic
+from gsbench.studies import MAIN_STUDIES
 
 # table id prefix -> section (study) it belongs to
 _SECTION_OF = [

@@ -15,7 +15,6 @@ from gsbench.reports.spec import LOGICAL, MetricSpec, metric_spec
 from gsbench.reports.table import Cell
 
 VALUE_COLUMNS = ("metric", "value", "metric_impl", "reason", "source")
-MAIN_STUDIES = (None, "reconstruction")  # runs that feed Tables I-III (standalone runs have study None)
 
 
 def is_null(v: Any) -> bool:

@@ -22,9 +22,10 @@ from PIL import Image
 
 from gsbench.errors import InputError
 from gsbench.previews import FRAME_ARRAYS, REMOVAL_ARRAYS, read_arrays, read_manifest
-from gsbench.reports.data import MAIN_STUDIES, Results, is_null
+from gsbench.reports.data import Results, is_null
 from gsbench.reports.spec import method_label
 from gsbench.store import write_bytes_atomic
+from gsbench.studies import MAIN_STUDIES
 
 log = logging.getLogger(__name__)
 e = html.escape

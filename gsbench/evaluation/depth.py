@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from gsbench.metric_table import DEPTH_METRICS
 from gsbench.resize import resize_nearest
-from gsbench.results import DEPTH_METRICS
 
 from .block import Block, to_numpy
 from .frames import view_name

@@ -17,7 +17,7 @@ from gsbench.camera import training_size
 from gsbench.config import setting
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
-from gsbench.results import FRAME_SETS
+from gsbench.metric_table import FRAME_SETS
 
 RESOLUTIONS = ("reference", "train")
 

@@ -7,9 +7,9 @@ import math
 import numpy as np
 
 from gsbench.config import setting
+from gsbench.metric_table import REMOVAL_METRICS
 from gsbench.metrics.image import quantize_uint8
 from gsbench.resize import resize_nearest, resize_rgb
-from gsbench.results import REMOVAL_METRICS
 
 from .block import Block, to_numpy
 

@@ -11,8 +11,9 @@ from typing import Any, Optional
 
 from gsbench import rundir
 from gsbench.environment import PeakMemory, env_info
+from gsbench.metric_table import ORDERING_METRICS, SEG_BASES, seg_metric
 from gsbench.metrics import ordering as MO
-from gsbench.results import ORDERING_METRICS, SEG_BASES, run_results, seg_metric
+from gsbench.results import run_results
 from gsbench.runlock import RunLock
 from gsbench.store import read_json, write_json_atomic
 

@@ -17,9 +17,10 @@ from typing import Optional
 import numpy as np
 
 from gsbench.config import setting
+from gsbench.config_keys import QUERY_MODES
 from gsbench.errors import InputError
+from gsbench.metric_table import FRAME_SET_SUFFIX, SEG_BASES, seg_metric
 from gsbench.metrics import lerf, ovs3d
-from gsbench.results import FRAME_SET_SUFFIX, QUERY_MODES, SEG_BASES, seg_metric
 
 from .block import Block, to_numpy
 from .frames import eval_settings, ovs3d_downsample, segmentation_camera, size_text, view_name

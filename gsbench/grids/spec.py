@@ -18,20 +18,12 @@ import yaml
 from gsbench.config import check_value, default_tree, flatten, load_tree, load_yaml, parse_overrides, preset_path
 from gsbench.datasets import synthetic
 from gsbench.errors import InputError
+from gsbench.studies import STUDIES as STUDY_TABLE
 
 GRID_DIR = Path(__file__).parent
 
-# Study names and the axis keys they vary (gsbench/store.py docstring is the contract).
-STUDIES: dict[str, tuple[str, ...]] = {
-    "reconstruction": ("method",),
-    "ordering": ("priors.ordering",),
-    "depth_formulation": ("gaussiands.depth_formulation",),
-    "loss_subsets": ("gaussiands.losses.depth", "gaussiands.losses.tv", "gaussiands.losses.ds"),
-    "latent_dim": ("gaussiands.latent_dim", "method"),
-    "lambda_grid": ("gaussiands.lambdas.depth", "gaussiands.lambdas.tv", "gaussiands.lambdas.sem",
-                    "gaussiands.lambdas.ds"),
-    "depth_noise": ("priors.depth.noise.type", "priors.depth.noise.severity"),
-}
+# Study names and the axis keys they vary: the one studies table, gsbench/studies.py.
+STUDIES: dict[str, tuple[str, ...]] = {name: st.axes for name, st in STUDY_TABLE.items()}
 TOP_KEYS = {"study", "description", "base", "scenes", "seeds", "mode", "axes", "sweeps", "extra_cells"}
 BASE_KEYS = {"method", "preset", "set"}
 

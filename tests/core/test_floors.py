@@ -42,6 +42,8 @@ FLOORS: dict[str, int] = {
     "gsbench.device": 0,           # the one device rule (train.device, a model prior's default)
     "gsbench.resize": 0,           # every resize: RGB as 3DGS, nearest as PIL, area
     "gsbench.rundir": 0,           # the run folder's file names, status reader beside its writer
+    "gsbench.metric_table": 0,     # every metric name and how it is shown
+    "gsbench.studies": 0,          # the one table of studies (axes, labels, reference rows)
     # 1: what a method is built from
     "gsbench.render": 1,
     "gsbench.priors": 1,

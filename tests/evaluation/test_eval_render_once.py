@@ -35,9 +35,9 @@ class _Counting:
 def _old_flow(method, scene, protocols, sets, config):
     """The flow before frames were shared: every (protocol, frame set, mode) scores on its own,
     rendering (and decoding) each of its frames again."""
+    from gsbench.config_keys import QUERY_MODES
     from gsbench.evaluation.block import Block
     from gsbench.evaluation.segmentation import query_mode, score_3dovs, score_lerf
-    from gsbench.results import QUERY_MODES
     out = Block()
     for p in protocols:
         fn = score_3dovs if p == "3dovs" else score_lerf

@@ -145,7 +145,7 @@ def test_results_builders_key_skipped_by_metric_name():
 
 
 def test_query_modes_have_different_ids():
-    from gsbench.results import seg_metric
+    from gsbench.metric_table import seg_metric
     assert seg_metric("miou", "lerf", "decode", "held-out") == "miou_lerf_decode_heldout"
     assert seg_metric("pixel_acc", "3dovs") == "pixel_acc_3dovs"
 

@@ -126,7 +126,7 @@ def test_eval_saves_previews_that_reproduce_the_scored_numbers(tmp_path):
     from gsbench.config import load_config
     from gsbench.datasets.synthetic import make_scene
     from gsbench.evaluation import evaluate_run
-    from gsbench.results import seg_metric
+    from gsbench.metric_table import seg_metric
     from gsbench.runs import train_run
     from gsbench.store import read_json, write_json_atomic
     scene = make_scene("tabletop-small", tmp_path / "s", seed=0, views=10, resolution=(48, 36))
