@@ -23,7 +23,9 @@ from gsbench.studies import STUDIES as STUDY_TABLE
 GRID_DIR = Path(__file__).parent
 
 # Study names and the axis keys they vary: the one studies table, gsbench/studies.py.
-STUDIES: dict[str, tuple[str, ...]] = {name: st.axes for name, st in STUDY_TABLE.items()}
+# A grid of a paper study may vary only that study's axes; a control or smoke study (e.g. tiny-test)
+# is a name, not a contract, so its grids may vary anything.
+STUDIES: dict[str, tuple[str, ...]] = {name: st.axes for name, st in STUDY_TABLE.items() if st.kind == "paper"}
 TOP_KEYS = {"study", "description", "base", "scenes", "seeds", "mode", "axes", "sweeps", "extra_cells"}
 BASE_KEYS = {"method", "preset", "set"}
 
