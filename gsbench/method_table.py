@@ -63,8 +63,6 @@ def _load() -> None:
         return
     _LOADING = True
     try:
-        before = dict(_REGISTRY)          # methods registered by hand before the first use (tests)
-        _REGISTRY.clear()
         for module in BUILTIN_SPECS:
             _add(importlib.import_module(module).SPEC, module)
         for ep in entry_points(group=ENTRY_POINT_GROUP):
@@ -78,8 +76,6 @@ def _load() -> None:
                 raise InputError(f"{where}: names {type(spec).__name__}, not a gsbench MethodSpec")
             _add(spec, where)
             log.debug("method %s registered by %s", spec.name, where)
-        for name, spec in before.items():
-            _REGISTRY.setdefault(name, spec)
         _LOADED = True
     finally:
         _LOADING = False

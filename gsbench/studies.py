@@ -36,6 +36,14 @@ _LOSSES = ("gaussiands.losses.depth", "gaussiands.losses.tv", "gaussiands.losses
 _NOISE = ("priors.depth.noise.type", "priors.depth.noise.severity")
 _LAMBDAS = ("gaussiands.lambdas.depth", "gaussiands.lambdas.tv", "gaussiands.lambdas.sem", "gaussiands.lambdas.ds")
 
+# the collected columns of the studies' axes, as the report and the paper's claims select rows by them
+AX_ORDERING = column("priors.ordering")
+AX_FORMULATION = column("gaussiands.depth_formulation")
+AX_LOSSES = [column(k) for k in _LOSSES]
+AX_LATENT = column("gaussiands.latent_dim")
+AX_LAMBDAS = [column(k) for k in _LAMBDAS]
+AX_NOISE_TYPE, AX_NOISE_SEVERITY = (column(k) for k in _NOISE)
+
 _ALL: tuple[Study, ...] = (
     Study("reconstruction", "Reconstruction and segmentation per scene (Tables I-III)", ("method",),
           {"method": "gaussiands"}, "GaussianDS (the paper's method) on the same scene", main=True),
@@ -65,4 +73,5 @@ STUDIES: dict[str, Study] = {s.name: s for s in _ALL}
 # runs that feed the main tables: standalone runs (no study) and the main studies
 MAIN_STUDIES: tuple[Optional[str], ...] = (None, *(s.name for s in _ALL if s.main))
 
-__all__ = ["Study", "STUDIES", "MAIN_STUDIES", "column"]
+__all__ = ["Study", "STUDIES", "MAIN_STUDIES", "column", "AX_ORDERING", "AX_FORMULATION", "AX_LOSSES",
+           "AX_LATENT", "AX_LAMBDAS", "AX_NOISE_TYPE", "AX_NOISE_SEVERITY"]

@@ -7,6 +7,9 @@ from __future__ import annotations
 
 from gsbench.method_table import METHODS, get_spec
 from gsbench.metric_table import LOGICAL_SPEC, METRICS, MetricSpec
+
+from gsbench.studies import (AX_FORMULATION, AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY,  # noqa: F401  isort: skip
+                             AX_NOISE_TYPE, AX_ORDERING)
 from gsbench.studies import STUDIES as STUDY_TABLE
 
 # Logical metric -> concrete metric name per protocol ("mIoU" of a 3D-OVS scene is miou_3dovs).
@@ -20,14 +23,6 @@ PROTOCOL_LABELS = {"3dovs": "3D-OVS protocol", "lerf": "LERF-OVS protocol", None
 # the paper's studies' labels (gsbench/studies.py); control and smoke studies are reported elsewhere
 STUDIES = {name: st.label for name, st in STUDY_TABLE.items() if st.kind == "paper"}
 
-AX_ORDERING = "axis.priors.ordering"
-AX_FORMULATION = "axis.gaussiands.depth_formulation"
-AX_LOSSES = ["axis.gaussiands.losses.depth", "axis.gaussiands.losses.tv", "axis.gaussiands.losses.ds"]
-AX_LATENT = "axis.gaussiands.latent_dim"
-AX_LAMBDAS = ["axis.gaussiands.lambdas.depth", "axis.gaussiands.lambdas.tv",
-              "axis.gaussiands.lambdas.sem", "axis.gaussiands.lambdas.ds"]
-AX_NOISE_TYPE = "axis.priors.depth.noise.type"
-AX_NOISE_SEVERITY = "axis.priors.depth.noise.severity"
 
 ORDERING_LABELS = {"random": "Random", "filename": "Filename order", "pose": "Pose-nearest"}
 ORDERING_ORDER = ["random", "filename", "pose"]

@@ -135,7 +135,7 @@ def _as_list(value: Any, where: str) -> list:
 
 
 def _parse_scene(item: Any, where: str) -> SceneSpec:
-    known_presets = _known_presets()
+    known_presets = set(synthetic.PRESETS)
     if isinstance(item, dict):
         unknown = set(item) - {"preset", "path", "seed", "views", "resolution"}
         if unknown:
@@ -148,26 +148,20 @@ def _parse_scene(item: Any, where: str) -> SceneSpec:
         spec = SceneSpec(preset=item.get("preset"), path=item.get("path"), seed=int(item.get("seed", 0)),
                          views=item.get("views"), resolution=res)
     elif isinstance(item, str):
-        if known_presets is not None and item in known_presets:
+        if item in known_presets:
             spec = SceneSpec(preset=item)
         elif "/" in item or "$" in item or Path(item).exists():
             spec = SceneSpec(path=item)
-        elif known_presets is None:
-            spec = SceneSpec(preset=item)   # generator not importable: checked when the scene is made
         else:
             raise InputError(f"{where}: {item!r} is neither a synthetic preset ({', '.join(sorted(known_presets))}) "
                              "nor an existing folder (write paths with a '/', e.g. ./myscene)")
     else:
         raise InputError(f"{where}: a scene is a preset name, a folder path or a mapping, got {item!r}")
-    if spec.preset and known_presets is not None and spec.preset not in known_presets:
+    if spec.preset and spec.preset not in known_presets:
         raise InputError(
             f"{where}: unknown synthetic preset {spec.preset!r}; known: {', '.join(sorted(known_presets))}"
         )
     return spec
-
-
-def _known_presets() -> set[str]:
-    return set(synthetic.PRESETS)
 
 
 def find_grid(name_or_path: str | os.PathLike) -> Path:

@@ -10,12 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-AX_ORDERING = "axis.priors.ordering"
-AX_FORMULATION = "axis.gaussiands.depth_formulation"
-AX_LOSSES = ["axis.gaussiands.losses.depth", "axis.gaussiands.losses.tv", "axis.gaussiands.losses.ds"]
-AX_LATENT = "axis.gaussiands.latent_dim"
-AX_NOISE_TYPE = "axis.priors.depth.noise.type"
-AX_NOISE_SEVERITY = "axis.priors.depth.noise.severity"
+from gsbench.studies import AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_ORDERING
 
 ROBUST_MARGIN_DB = 0.5  # gsbench's equivalence margin for "PSNR is robust" (dB), not the paper's
 MAX = "max"             # selector value: the highest value of that axis among the study's runs
