@@ -5,8 +5,8 @@ One home for the layout, so a writer and its readers cannot disagree on a name:
     RUN/config.json          the resolved config (gsbench.runs)
     RUN/env.json             the machine and software that trained it
     RUN/status.json          running | done | failed | nonfinite, with the message (read_status / write_status)
-    RUN/checkpoint.pt        the last optimisation state (gsbench.training)
-    RUN/train_log.jsonl      one line per log / eval step (gsbench.training)
+    RUN/checkpoint.pt        the last optimisation state (gsbench.runs.training)
+    RUN/train_log.jsonl      one line per log / eval step (gsbench.runs.training)
     RUN/train_summary.json   training time, peaks, the method's info
     RUN/model.pt             the trained method (Method.save / Method.load)
     RUN/results.json         the evaluation (gsbench.results schema)

@@ -3,10 +3,10 @@ implementation.
 
 Every method in gsbench is a Gaussian field plus, for semantic methods, a frozen feature autoencoder
 and the id of the feature provider that embeds text. The harness owns the training loop
-(gsbench/training.py); a method prepares its data and yields its optimisation phases:
+(gsbench/runs/training.py); a method prepares its data and yields its optimisation phases:
 
     m = get_method("gaussiands")()
-    gsbench.training.train_method(m, scene, run_dir, config)   # runs m.train_phases(...), writes the log
+    gsbench.runs.training.train_method(m, scene, run_dir, config)   # runs m.train_phases(...), writes the log
                                                                 # and checkpoints into run_dir
     m.save(run_dir / "model.pt"); m = Method.load(run_dir / "model.pt")
     m.render(camera)                          # RenderOutput; .features = rendered latent S_hat (or None)

@@ -46,7 +46,7 @@ def make_trainer(config: dict, views: TrainViews, scene, field0: GaussianField, 
                  trainable: Optional[set] = None, densify: bool = True,
                  extra_state: Optional[Callable[[], dict]] = None) -> Trainer:
     """One optimisation phase with the shared 3DGS recipe and the method's loss, on the views' device:
-    what a method yields to the harness's loop (gsbench.training) from `train_phases`."""
+    what a method yields to the harness's loop (gsbench.runs.training) from `train_phases`."""
     dev = next(iter(views.images.values())).device if views.images else torch.device("cpu")
     return Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase=phase,
                    iterations=iterations, trainable=trainable, densify=densify, backend=backend,

@@ -1,6 +1,6 @@
 """The shared 3DGS optimisation of every method: one phase's state and its step (`Trainer`). The loop
 around the steps (schedule, logging, periodic evaluation, checkpoints, resume) is the harness's,
-gsbench/training.py.
+gsbench/runs/training.py.
 
 Recipe (3DGS, every number a config value under `train`): Adam with one group per tensor
 (position LR times the scene extent with exponential decay; colour, opacity, scaling, rotation,
@@ -293,7 +293,7 @@ class Trainer:
 
     # ------------------------------------------------------------------ one step
     def train_iteration(self) -> StepResult:
-        """One optimisation step (the harness, gsbench.training, owns the loop around it): the next view,
+        """One optimisation step (the harness, gsbench.runs.training, owns the loop around it): the next view,
         render, the method's loss, backward, densification statistics, Adam, densify / prune and the
         opacity reset on their schedule. Values stay on the device; a non-finite loss is flagged in
         `bad_step` and raised by `raise_if_bad` at the loop's next synchronisation point."""

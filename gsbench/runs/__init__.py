@@ -31,7 +31,7 @@ from gsbench.methods.base import Method
 from gsbench.methods.registry import get_method, resolve_for_scene
 from gsbench.runlock import RunLock
 from gsbench.store import read_json, read_jsonl, write_json_atomic
-from gsbench.training import train_method
+from gsbench.runs.training import train_method
 
 log = logging.getLogger(__name__)
 

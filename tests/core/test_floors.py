@@ -54,7 +54,6 @@ FLOORS: dict[str, int] = {
     # 3: what runs and scores methods
     "gsbench.evaluation": 3,
     "gsbench.runs": 3,
-    "gsbench.training": 3,         # the training loop: the harness runs the methods' phases
     "gsbench.grids": 3,
     "gsbench.collect": 3,          # results.json files -> one table
     "gsbench.stress": 3,           # numerical battery over render, losses and metrics

@@ -18,8 +18,8 @@ from gsbench.methods.grouping import (
     track_classes,
     track_table,
 )
+from gsbench.runs.training import train_method
 from gsbench.store import load_torch, read_json, read_jsonl
-from gsbench.training import train_method
 
 
 def test_identity_loss_is_cross_entropy_over_log_classes():

@@ -12,7 +12,7 @@ from gsbench.errors import InputError
 from gsbench.methods import registry
 from gsbench.methods.base import Method
 from gsbench.methods.registry import resolve_for_scene
-from gsbench.training import train_method
+from gsbench.runs.training import train_method
 
 
 class DummyMethod(Method):

@@ -1,4 +1,4 @@
-"""The harness's training loop (gsbench/training.py) reproduces, on a seed, what the methods' own loops
+"""The harness's training loop (gsbench/runs/training.py) reproduces, on a seed, what the methods' own loops
 computed before it took them over: every built-in method on the tiny scene, with periodic evaluation,
 densification and checkpoints, against tests/data/loop_golden.json (tests/support/loop_golden.py)."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The harness's periodic segmentation score (gsbench/training.py): evaluation's own scorer on the
+"""The harness's periodic segmentation score (gsbench/runs/training.py): evaluation's own scorer on the
 eval views, in view order, with the configured query mode; nothing while the field has no semantics."""
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import torch
 
-from gsbench import training
+from gsbench.runs import training
 
 
 def _semantic_stub(has_semantics: bool = True):
