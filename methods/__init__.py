@@ -9,13 +9,16 @@ from __future__ import annotations
 
 from typing import Any
 
-from gsbench.methods.registry import METHODS, get_method
+from gsbench.method_table import METHODS
 
 
 def __getattr__(name: str) -> Any:
     if name == "Method":
         from gsbench.methods.base import Method  # lazy: start-up (no trainer for a listing)
         return Method
+    if name == "get_method":
+        from gsbench.methods.registry import get_method  # lazy: start-up (a spec module loads this package)
+        return get_method
     raise AttributeError(f"module 'gsbench.methods' has no attribute {name!r}")
 
 

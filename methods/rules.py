@@ -5,8 +5,6 @@ from __future__ import annotations
 from typing import Callable
 
 from gsbench.config import setting
-from gsbench.datasets.splits import split_ids
-from gsbench.priors.labels import SOURCE_TEXT, label_source, labelled_views
 
 Drop = Callable[[str, str], None]
 
@@ -36,6 +34,8 @@ def semantic_source(cfg: dict, scene) -> tuple[bool, str]:
 
     The reason names what the scene lacks: instance maps (only synthetic scenes have them), any
     labels at all, or labels on a view that is trained on."""
+    from gsbench.datasets.splits import split_ids  # lazy: start-up (listing methods loads no priors)
+    from gsbench.priors.labels import SOURCE_TEXT, label_source, labelled_views  # lazy: start-up (as above)
     m = cfg["priors"]["masks"]["provider"]
     f = cfg["priors"]["features"]["provider"]
     labels = label_source(scene)
