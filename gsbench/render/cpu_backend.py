@@ -22,15 +22,16 @@ so `out.means2d.grad` is filled after backward exactly as the reference's retain
 `rasterize_cpu(proj, channels, W, H)` keeps the rasterizer-only API (`_Rasterize`: the same
 kernels behind a Function over means2d, conics, opacities and channels of a torch `Projected`).
 
-How it runs (kernels in gsbench/render/cpu_kernels.py):
+How it runs (kernels in gsbench/render/cpu_binning.py and cpu_kernels.py, which says how they
+vectorise):
 1. sort the visible Gaussians by depth (stable), bin them into 16x16 tiles with the reference's
    box-overlap test (serial, O(pairs));
 2. forward: one task per tile over all cores (numba prange, dynamic chunks of one tile); each
-   Gaussian, front to back, is composited into all channels of the tile's pixels in one pass; per
-   pixel only the final transmittance and the index of the last contributing Gaussian are kept;
+   Gaussian, front to back, is composited into all channels of the tile's pixels; per pixel only
+   the final transmittance and the index of the last contributing Gaussian are kept;
 3. backward: per tile, back to front, the transmittance is recovered as T_k = T_{k+1} / (1 - a_k);
-   each (tile, Gaussian) pair gets its own gradient row: the sum over the tile's pixels (row-major
-   order) in float64, stored in the working dtype. Tiles are processed in waves (consecutive
+   each (tile, Gaussian) pair gets its own gradient row: the sum over the tile's pixels in
+   float64, stored in the working dtype. Tiles are processed in waves (consecutive
    tiles whose rows fit in ROW_BUDGET_BYTES, at least one tile); after each wave the rows are
    added to the per-Gaussian gradients serially in row order (tile index, then depth rank).
 Determinism rule: every pixel and every (tile, Gaussian) row is computed by exactly one task in a
@@ -56,9 +57,9 @@ import torch
 from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
 from gsbench.phases import timed
+from gsbench.render import cpu_binning, rules
 from gsbench.render import cpu_kernels as K
 from gsbench.render import cpu_projection as P
-from gsbench.render import rules
 from gsbench.render.projection import Projected, camera_tensors
 
 # Must precede the first parallel kernel launch. Set in the environment too: numba re-reads its
@@ -98,6 +99,8 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
 
     Returns (out (H,W,C), t_final (H,W), state for `_raster_backward`).
     """
+    if not 1 <= tile_size <= K.ROW:
+        raise ValueError(f"render backend 'cpu': tile_size must be 1..{K.ROW}, got {tile_size}")
     np_dtype = ch.dtype.type
     m, n_ch = ch.shape
     order = np.argsort(z, kind="stable")
@@ -113,9 +116,9 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
     r = radii[order].astype(np_dtype)
     x0, x1 = md[:, 0] - r[:, 0], md[:, 0] + r[:, 0]
     y0, y1 = md[:, 1] - r[:, 1], md[:, 1] + r[:, 1]
-    tile_off, ranks = K.bin_tiles(x0, x1, y0, y1, width, height, tile_size)
+    tile_off, ranks = cpu_binning.bin_tiles(x0, x1, y0, y1, width, height, tile_size)
     ch_s = np.ascontiguousarray(ch[order])
-    pxc = np.arange(width, dtype=np_dtype) + np_dtype(0.5)
+    pxc = np.arange(width + K.ROW, dtype=np_dtype) + np_dtype(0.5)   # lanes past the image's edge read it (masked)
     pyc = np.arange(height, dtype=np_dtype) + np_dtype(0.5)
     consts = _consts(np_dtype)
     tiles_x = (width + tile_size - 1) // tile_size

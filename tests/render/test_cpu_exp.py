@@ -1,0 +1,65 @@
+"""The `cpu` kernels' exponential (`_exp`, a polynomial without a library call) against float64 exp."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from numba import njit
+
+from gsbench.render.cpu_backend import rasterize_cpu
+from gsbench.render.cpu_kernels import _exp, _like
+from gsbench.render.projection import Projected
+
+
+@njit(cache=False)
+def _exp32(x, out):
+    for i in range(x.size):
+        out[i] = _like(_exp(np.float64(x[i])), x[i])
+
+
+@njit(cache=False)
+def _exp64(x, out):
+    for i in range(x.size):
+        out[i] = _like(_exp(x[i]), x[i])
+
+
+def _samples() -> np.ndarray:
+    rng = np.random.default_rng(0)
+    edges = [0.0, -0.0, -1e-30, -1e-7, -0.5 * np.log(2.0), -np.log(2.0), -1.0, -5.54, -87.3, -103.0,
+             -104.0, -700.0, -708.0, -709.0, -745.0, -1e4]
+    return np.concatenate([edges, -rng.random(200_000) * 20.0, -rng.random(20_000) * 750.0,
+                           -np.linspace(0.0, 1e-6, 1000)])
+
+
+def test_float32_is_the_correctly_rounded_exp():
+    x = _samples().astype(np.float32)
+    got = np.empty_like(x)
+    _exp32(x, got)
+    want = np.exp(x.astype(np.float64)).astype(np.float32)     # float64 exp, rounded once
+    assert np.array_equal(got, want), f"{int(np.sum(got != want))} of {x.size} differ"
+
+
+def test_float64_within_a_few_ulp():
+    x = _samples()
+    x = x[x >= -700.0]             # below that np.exp is subnormal / 0 and the clamp takes over
+    got = np.empty_like(x)
+    _exp64(x, got)
+    want = np.exp(x)
+    rel = np.abs(got - want) / want
+    assert rel.max() <= 4 * np.finfo(np.float64).eps
+
+
+def test_clamped_outside_its_domain():
+    """Callers mask every lane whose exponent is > 0 or NaN; the value there only has to be finite."""
+    x = np.array([1.0, 50.0, np.inf, -np.inf, np.nan, -1e300])
+    got = np.empty_like(x)
+    _exp64(x, got)
+    assert np.all(np.isfinite(got)) and np.all(got <= 1.0) and np.all(got >= 0.0)
+
+
+def test_tile_size_above_the_lane_count_is_refused():
+    n = 3
+    proj = Projected(torch.arange(n), torch.full((n, 2), 4.0), torch.tensor([[1.0, 0.0, 1.0]] * n),
+                     torch.full((n,), 2.0), torch.full((n,), 0.5), torch.full((n, 2), 3), torch.zeros(n, 3))
+    with pytest.raises(ValueError, match="tile_size"):
+        rasterize_cpu(proj, torch.ones(n, 3), 8, 8, tile_size=17)
