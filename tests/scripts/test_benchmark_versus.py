@@ -1,0 +1,33 @@
+"""benchmarks/versus.py: its table parsing and ratios (the end-to-end run installs two commits and is
+left to the benchmark itself; nothing here times anything)."""
+import importlib.util
+
+from paths import REPO_ROOT
+
+
+def _load():
+    path = REPO_ROOT / "benchmarks" / "versus.py"
+    spec = importlib.util.spec_from_file_location("versus_bench", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_rows_skip_separators_and_split_cells():
+    mod = _load()
+    md = "| a | b |\n|---|---|\n| cpu | 2.0 |\nnot a row\n| x | y |"
+    assert mod._rows(md) == [["a", "b"], ["cpu", "2.0"], ["x", "y"]]
+
+
+def test_table_ratios_point_the_right_way():
+    mod = _load()
+    base = {"side": "old", "load": 0.1, "render_fwdbwd_ms": 100.0, "gaussiands_its": 4.0,
+            "train_s": 80.0, "eval_s": 20.0, "psnr": 25.0, "miou_3dovs": 0.5, "miou_lerf": 0.6}
+    head = {"side": "new", "load": 0.2, "render_fwdbwd_ms": 40.0, "gaussiands_its": 6.0,
+            "train_s": 30.0, "eval_s": 10.0, "psnr": 25.1, "miou_3dovs": 0.51, "miou_lerf": 0.59}
+    t = mod.table(base, head)
+    assert "| cpu render fwd+bwd ms | 100.00 | 40.00 | 2.50x |" in t          # time: old / new
+    assert "| gaussiands it/s | 4.00 | 6.00 | 1.50x |" in t                  # rate: new / old
+    assert "| cpu-medium train+eval s | 100.0 | 40.0 | 2.50x |" in t
+    assert "| psnr | 25.0000 | 25.1000 | |" in t
+    assert "bare step" not in t                                             # absent on both sides: no row
