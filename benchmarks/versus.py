@@ -4,9 +4,9 @@
                                           [--size 20000@256x192] [--skip-train] [--json out.json]
 
 Each side (a commit exported with `git archive`, or a copy of a working tree's files that git does not
-ignore) is installed (not editable, no dependencies) into its own folder under --work and run with
-this venv's Python and packages, so both sides use the same torch, numba and numpy. Every number
-comes from that side's own code and its own benchmark scripts:
+ignore) is copied into its own folder under --work as its pyproject.toml maps the package
+(package-dir), and run with this venv's Python and packages, so both sides use the same torch, numba
+and numpy. Every number comes from that side's own code and its own benchmark scripts:
 - `cpu` render fwd+bwd ms: `benchmarks/render_cpu.py --scenes WxH/N` (random Gaussians, 3 feature
   channels; projection, rasterization and their backward; best of the repeats);
 - bare step, vanilla and gaussiands it/s: `benchmarks/train_speed.py --sizes N@WxH`;
@@ -27,6 +27,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -67,8 +68,12 @@ def install(rev: str, work: Path) -> tuple[Path, Path, str]:
     site = work / f"site-{label.split()[0]}"
     if site.exists():
         shutil.rmtree(site)
-    _run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation", "--target",
-          str(site), str(src)], dict(os.environ), work, work / f"install-{label.split()[0]}.log")
+    # the package as its own pyproject.toml maps it (package-dir), copied folder by folder: a
+    # commit's `packages` list may miss a folder, which pip would then leave out
+    mapping = tomllib.loads((src / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
+    for name, folder in sorted(mapping.items(), key=lambda kv: kv[0].count(".")):
+        shutil.copytree(src / folder, site / name.replace(".", "/"), dirs_exist_ok=True,
+                        ignore=shutil.ignore_patterns("__pycache__"))
     return src, site, label
 
 
