@@ -245,14 +245,15 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
             r_lo, r_hi = _row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
             if r_hi < r_lo:
                 continue
-            p0 = np.uint64(r_lo * ROW)
-            p1 = np.uint64((r_hi + 1) * ROW)
+            c_lo = ROW                     # first and last row where the Gaussian contributes
+            c_hi = -1
             for row in range(r_lo, r_hi + 1):
                 # all ROW lanes of the row, branch-free (masks instead of `continue`), over unsigned
                 # indices (numba then emits no negative-index wraparound): LLVM vectorises it
                 dy = pyc[ya + row] - my
                 rb = np.uint64(row * ROW)
                 n_stop = 0
+                n_con = 0
                 for i in range(np.uint64(0), np.uint64(ROW)):
                     p = rb + i
                     dx = pxc[xau + i] - mx
@@ -266,8 +267,14 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
                     st[p] = tn if con else (-tp if ok else tp)
                     st[UMAXPIX + p] = jp1 if con else st[UMAXPIX + p]
                     n_stop += ok != con
+                    n_con += con
                 n_live -= n_stop
-            for k in range(n_ch):
+                if n_con > 0:
+                    c_lo = min(c_lo, row)
+                    c_hi = row
+            p0 = np.uint64(c_lo * ROW)
+            p1 = np.uint64((c_hi + 1) * ROW)
+            for k in range(n_ch if c_hi >= c_lo else 0):
                 cv = ch[g, k]
                 ab = np.uint64(k * MAXPIX)
                 for p in range(p0, p1):
@@ -416,7 +423,7 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
             for k in range(n_cols):
                 acc[k] = 0.0
             r_lo, r_hi = _row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
-            u_lo = ROW                                  # first and last row with columns
+            u_lo = ROW                                  # first and last row with a contributing pixel
             u_hi = -1
             for row in range(r_lo, r_hi + 1):
                 dy = pyc[ya + row] - my
@@ -427,8 +434,7 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
                         lb[UL_V + rb + i] = 0.0
                         lb[UL_CL + rb + i] = 0.0
                     continue
-                u_lo = min(u_lo, row)
-                u_hi = row
+                n_v = 0
                 if True:
                     dy64 = np.float64(dy)
                     for i in range(np.uint64(0), np.uint64(ROW)):
@@ -455,6 +461,10 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
                         lb[UL_G + p] = np.float64(G)
                         lb[UL_DX + p] = np.float64(dx)
                         lb[UL_DY + p] = dy64
+                        n_v += v
+                if n_v > 0:
+                    u_lo = min(u_lo, row)
+                    u_hi = row
             if u_hi >= u_lo:
                 p0 = np.uint64(u_lo * ROW)
                 p1 = np.uint64((u_hi + 1) * ROW)
