@@ -64,7 +64,7 @@ base:
 scenes: [{preset: tabletop-small, views: 6, resolution: [32, 24]}]
 seeds: [0]
 axes:
-  train.init.num_random: [400000, 1000]     # the big cell runs first
+  train.init.num_random: [1000000, 1000]    # the big cell runs first; big enough to stand >100 MB above the small one
 """
 
 
@@ -89,7 +89,7 @@ def test_grid_cells_do_not_inherit_an_earlier_cells_memory(tmp_path, executor):
                          log=lambda s: None)
     assert [r["state"] for r in rep.results] == ["done", "done"]
     mem = _memory_by_size(tmp_path / "runs")
-    big, small = mem[400000], mem[1000]
+    big, small = mem[1000000], mem[1000]
     sources = {read_json(p)["rss_source"] for p in (tmp_path / "runs").glob("*/train_summary.json")}
     if executor == "serial" and sources != {RSS_RESET}:
         pytest.skip("in one process the per-run figure needs /proc/self/clear_refs, which this kernel refuses")
