@@ -18,10 +18,11 @@ import numpy as np
 import pytest
 import torch
 
+from gsbench.cli import main
 from gsbench.store import load_torch, read_json
 
 EXE = str(Path(sys.executable).parent / "gsbench")
-ITERS = 200
+ITERS = 100     # room for two kills after checkpoints 20..80 (s1 < s2 < ITERS) even when one is detected late
 CKPT_EVERY = 20
 LOG_EVERY = 5
 
@@ -34,12 +35,16 @@ def workspace(tiny_scene, tmp_path_factory) -> Path:
     return root
 
 
-def train_cmd(scene: Path, out: Path, *sets: str) -> list[str]:
-    cmd = [EXE, "train", "--method", "gaussiands", "--scene", str(scene), "--preset", "cpu-small", "--out", str(out),
-           "--no-progress"]
+def train_args(scene: Path, out: Path, *sets: str) -> list[str]:
+    args = ["train", "--method", "gaussiands", "--scene", str(scene), "--preset", "cpu-small", "--out", str(out),
+            "--no-progress", "--set", "gaussiands.autoencoder.epochs=10"]   # not 500: ~2.5 s saved per process
     for s in sets:
-        cmd += ["--set", s]
-    return cmd
+        args += ["--set", s]
+    return args
+
+
+def train_cmd(scene: Path, out: Path, *sets: str) -> list[str]:
+    return [EXE, *train_args(scene, out, *sets)]
 
 
 def checkpoint_step(run: Path) -> int:
@@ -134,26 +139,28 @@ def test_sigint_then_sigkill_then_resume_gives_a_complete_run(workspace, tmp_pat
     from gsbench.runs import load_run
     method, cfg, _ = load_run(run)
     assert cfg["run_id"] == run_id and method.field.num > 0
-    proc = subprocess.run([EXE, "eval", str(run), "--no-progress"], capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert main(["eval", str(run), "--no-progress"]) == 0    # in-process: the run, not the CLI start, is under test
     res = read_json(run / "results.json")
     assert res["status"] == "done" and res["run_id"] == run_id
     assert res["metrics"]["psnr"] is not None and np.isfinite(res["metrics"]["psnr"])
 
 
+# The non-finite tests call the CLI's main() in this process (the same exit code and stderr as the
+# executable, without a ~3.5 s interpreter start each); the tests above run `gsbench train` as a process.
 @pytest.mark.slow
-def test_nonfinite_training_stops_with_status_and_keeps_last_good_checkpoint(workspace):
+def test_nonfinite_training_stops_with_status_and_keeps_last_good_checkpoint(workspace, capsys):
     """A colour learning rate of 1e30 makes step 1 finite (colours ~1e30) and the step-2 loss overflow."""
     scene, run = workspace / "scene", workspace / "run_nonfinite"
-    cmd = train_cmd(scene, run, "train.iterations=20", "train.checkpoint_every=1", "train.eval_every=0",
-                    "train.lr.color=1e30")
+    args = train_args(scene, run, "train.iterations=20", "train.checkpoint_every=1", "train.eval_every=0",
+                      "train.lr.color=1e30")
     t0 = time.time()
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    rc = main(args)
     assert time.time() - t0 < 600                                      # stopped, did not hang
-    assert proc.returncode == 1
-    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert rc == 1
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
     assert lines[-1].startswith("gsbench train: error: non-finite loss at step 2")
-    assert "Traceback" not in proc.stderr
+    assert "Traceback" not in err
     st = read_json(run / "status.json")
     assert st["state"] == "nonfinite" and "non-finite loss at step 2" in st["message"]
     assert read_json(run / "train_summary.json")["status"] == "nonfinite"
@@ -168,13 +175,12 @@ def test_nonfinite_training_stops_with_status_and_keeps_last_good_checkpoint(wor
     ("gaussiands.lambdas.tv=1e40", "non-finite loss at step 1"),              # inf in float32
     ("train.lr.opacity=1e38", "optimiser step overflowed at step 1"),         # Adam: lr / (1 - beta1) > float32 max
 ])
-def test_nonfinite_at_the_first_step_is_a_clear_status(workspace, poison, expect):
+def test_nonfinite_at_the_first_step_is_a_clear_status(workspace, poison, expect, capsys):
     run = workspace / ("run_" + poison.split("=")[0].replace(".", "_"))
-    proc = subprocess.run(train_cmd(workspace / "scene", run, "train.iterations=20", "train.eval_every=0", poison),
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 1
-    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-    assert lines[-1].startswith(f"gsbench train: error: {expect}") and "Traceback" not in proc.stderr
+    assert main(train_args(workspace / "scene", run, "train.iterations=20", "train.eval_every=0", poison)) == 1
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert lines[-1].startswith(f"gsbench train: error: {expect}") and "Traceback" not in err
     assert lines[-1].endswith("no checkpoint was written before this step")
     st = read_json(run / "status.json")
     assert st["state"] == "nonfinite" and expect in st["message"]
@@ -187,7 +193,8 @@ def test_a_second_train_into_a_running_folder_is_refused_and_a_sigkilled_holder_
     with one line naming the holder (and writes nothing); after a SIGKILL of the holder the next run takes
     the lock over and finishes the run."""
     run = tmp_path / "run"
-    cmd = train_cmd(workspace / "scene", run, f"train.iterations={ITERS}", f"train.checkpoint_every={CKPT_EVERY}",
+    # 60 steps: the holder is stopped right after its first checkpoint (20), 40 steps before its end
+    cmd = train_cmd(workspace / "scene", run, "train.iterations=60", f"train.checkpoint_every={CKPT_EVERY}",
                     f"train.log_every={LOG_EVERY}")
     log = tmp_path / "first.log"
     with open(log, "w") as f:
