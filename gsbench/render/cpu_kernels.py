@@ -135,6 +135,15 @@ def _tile_box(t, tiles_x, tile_size, width, height):
 
 
 @njit(inline="always", **_OPTS)
+def _span(centre, half, n):
+    """Indices [lo, hi] of 0..n-1 within `half` of `centre` (lo > hi: none), clamped before the
+    float -> int conversion so that huge or infinite bounds stay in range."""
+    lo = min(max(centre - half, -1.0), n + 1.0)
+    hi = min(max(centre + half, -1.0), n + 1.0)
+    return max(0, int(np.ceil(lo))), min(n - 1, int(np.floor(hi)))
+
+
+@njit(inline="always", **_OPTS)
 def _col_range(dy, mx, a, b, c, thr, xa, tw):
     """Columns [i_lo, i_hi] of a tile row where the computed exponent can reach `thr` (i_lo > i_hi: none).
 
@@ -159,10 +168,7 @@ def _col_range(dy, mx, a, b, c, thr, xa, tw):
     if not (slack >= 0.0):
         return 1, 0
     half = np.sqrt(2.0 * slack / a64) + 1.0
-    centre = mx64 - b64 * dy64 / a64 - 0.5 - xa      # column index where dx + b dy / a = 0
-    lo = min(max(centre - half, -1.0), tw + 1.0)
-    hi = min(max(centre + half, -1.0), tw + 1.0)
-    return max(0, int(np.ceil(lo))), min(tw - 1, int(np.floor(hi)))
+    return _span(mx64 - b64 * dy64 / a64 - 0.5 - xa, half, tw)   # centre: the column where dx + b dy / a = 0
 
 
 @njit(inline="always", **_OPTS)
@@ -192,10 +198,7 @@ def _row_range(my, mx, a, b, c, thr, xa, ya, tw, th):
     if not (room >= 0.0):
         return 1, 0
     half = np.sqrt(2.0 * room / q) * 1.000001 + 1.0
-    centre = my64 - 0.5 - ya                          # row index where dy = 0
-    lo = min(max(centre - half, -1.0), th + 1.0)
-    hi = min(max(centre + half, -1.0), th + 1.0)
-    return max(0, int(np.ceil(lo))), min(th - 1, int(np.floor(hi)))
+    return _span(my64 - 0.5 - ya, half, th)          # centre: the row where dy = 0
 
 
 @njit(parallel=True, **_OPTS)
@@ -435,33 +438,32 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
                         lb[UL_CL + rb + i] = 0.0
                     continue
                 n_v = 0
-                if True:
-                    dy64 = np.float64(dy)
-                    for i in range(np.uint64(0), np.uint64(ROW)):
-                        p = rb + i
-                        dx = pxc[xau + i] - mx
-                        power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
-                        G = _like(_exp(np.float64(power)), power)
-                        raw = op * G
-                        alpha = min(raw, amax)
-                        v = ((power <= zero) & (power >= thr) & (alpha >= amin) & (i < twu)
-                             & (jf < px[UX_LAST + p]))
-                        al64 = np.float64(alpha)
-                        om = np.float64(one - alpha)
-                        tr0 = px[UX_TR + p]
-                        trn = tr0 / om                      # transmittance before Gaussian j
-                        px[UX_TR + p] = trn if v else tr0
-                        lb[UL_AL + p] = al64 if v else 0.0
-                        lb[UL_OM + p] = om if v else 1.0
-                        lb[UL_W + p] = al64 * trn if v else 0.0
-                        lb[UL_DA + p] = 0.0
-                        lb[UL_V + p] = 1.0 if v else 0.0
-                        lb[UL_CL + p] = 1.0 if (v & (raw <= amax)) else 0.0   # no gradient through the clamp
-                        lb[UL_RAW + p] = np.float64(raw)
-                        lb[UL_G + p] = np.float64(G)
-                        lb[UL_DX + p] = np.float64(dx)
-                        lb[UL_DY + p] = dy64
-                        n_v += v
+                dy64 = np.float64(dy)
+                for i in range(np.uint64(0), np.uint64(ROW)):
+                    p = rb + i
+                    dx = pxc[xau + i] - mx
+                    power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
+                    G = _like(_exp(np.float64(power)), power)
+                    raw = op * G
+                    alpha = min(raw, amax)
+                    v = ((power <= zero) & (power >= thr) & (alpha >= amin) & (i < twu)
+                         & (jf < px[UX_LAST + p]))
+                    al64 = np.float64(alpha)
+                    om = np.float64(one - alpha)
+                    tr0 = px[UX_TR + p]
+                    trn = tr0 / om                      # transmittance before Gaussian j
+                    px[UX_TR + p] = trn if v else tr0
+                    lb[UL_AL + p] = al64 if v else 0.0
+                    lb[UL_OM + p] = om if v else 1.0
+                    lb[UL_W + p] = al64 * trn if v else 0.0
+                    lb[UL_DA + p] = 0.0
+                    lb[UL_V + p] = 1.0 if v else 0.0
+                    lb[UL_CL + p] = 1.0 if (v & (raw <= amax)) else 0.0   # no gradient through the clamp
+                    lb[UL_RAW + p] = np.float64(raw)
+                    lb[UL_G + p] = np.float64(G)
+                    lb[UL_DX + p] = np.float64(dx)
+                    lb[UL_DY + p] = dy64
+                    n_v += v
                 if n_v > 0:
                     u_lo = min(u_lo, row)
                     u_hi = row

@@ -1,21 +1,12 @@
 """benchmarks/scale.py runs end to end at a tiny size (a smoke test: every phase reported, the
 requested Gaussians trained, the cache read back; no timing or memory figure asserted)."""
-import importlib.util
 import json
 
-from paths import REPO_ROOT
-
-
-def _load():
-    path = REPO_ROOT / "benchmarks" / "scale.py"
-    spec = importlib.util.spec_from_file_location("scale_bench", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from bench_scripts import load_benchmark
 
 
 def test_scale_rehearsal_runs_every_phase_at_a_tiny_size(tmp_path, capsys):
-    mod = _load()
+    mod = load_benchmark("scale")
     out_json = tmp_path / "r.json"
     assert mod.main(["--views", "9", "--size", "48x36", "--gaussians", "400", "--steps", "2",
                      "--work", str(tmp_path / "w"), "--json", str(out_json)]) == 0

@@ -1,17 +1,13 @@
 """benchmarks/train_speed.py runs end to end (a smoke test: rows and ratios present, no timing asserted)."""
-import importlib.util
 import json
 
 import pytest
-from paths import REPO_ROOT
+from bench_scripts import load_benchmark
 
 
 @pytest.mark.slow
 def test_train_speed_prints_rows_and_writes_json(tmp_path, capsys):
-    path = REPO_ROOT / "benchmarks" / "train_speed.py"
-    spec = importlib.util.spec_from_file_location("train_speed", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_benchmark("train_speed")
     assert mod.main(["--sizes", "300@32x24", "--iters", "5", "--devices", "cpu",
                      "--json", str(tmp_path / "r.json")]) == 0
     out = capsys.readouterr().out

@@ -1,26 +1,16 @@
 """benchmarks/versus.py: its table parsing and ratios (the end-to-end run installs two commits and is
 left to the benchmark itself; nothing here times anything)."""
-import importlib.util
-
-from paths import REPO_ROOT
-
-
-def _load():
-    path = REPO_ROOT / "benchmarks" / "versus.py"
-    spec = importlib.util.spec_from_file_location("versus_bench", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from bench_scripts import load_benchmark
 
 
 def test_rows_skip_separators_and_split_cells():
-    mod = _load()
+    mod = load_benchmark("versus")
     md = "| a | b |\n|---|---|\n| cpu | 2.0 |\nnot a row\n| x | y |"
     assert mod._rows(md) == [["a", "b"], ["cpu", "2.0"], ["x", "y"]]
 
 
 def test_table_ratios_point_the_right_way():
-    mod = _load()
+    mod = load_benchmark("versus")
     base = {"side": "old", "load": 0.1, "render_fwdbwd_ms": 100.0, "gaussiands_its": 4.0,
             "train_s": 80.0, "eval_s": 20.0, "psnr": 25.0, "miou_3dovs": 0.5, "miou_lerf": 0.6}
     head = {"side": "new", "load": 0.2, "render_fwdbwd_ms": 40.0, "gaussiands_its": 6.0,
