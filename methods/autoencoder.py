@@ -26,10 +26,10 @@ def _mlp(dims: Sequence[int]) -> nn.Sequential:
 def _unit(x: torch.Tensor, inplace: bool = False) -> torch.Tensor:
     """Rows scaled to unit length. inplace: overwrite x (a fresh output nobody else holds, no graph);
     the values are the same either way. The largest magnitude max(max x, -min x) is |x|'s maximum
-    without an |x| temporary (evaluation decodes 512-d maps of every pixel)."""
-    lo, hi = torch.aminmax(x, dim=-1, keepdim=True)
+    without an |x| temporary (evaluation decodes 512-d maps of every pixel); amax and amin are two
+    passes but ~5x faster than torch.aminmax's one on the CPU, with the same values."""
     # divide by the largest magnitude first so the norm cannot overflow (float32 inputs ~1e20+)
-    m = torch.maximum(hi, -lo).clamp_min(1e-30)
+    m = torch.maximum(x.amax(dim=-1, keepdim=True), -x.amin(dim=-1, keepdim=True)).clamp_min(1e-30)
     x = x.div_(m) if inplace else x / m
     n = x.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     return x.div_(n) if inplace else x / n

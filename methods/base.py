@@ -47,7 +47,10 @@ from gsbench.store import load_torch, save_torch_atomic
 
 # what train_phases returns: yields each phase's Trainer, receives that phase's final field
 Phases = Generator[Trainer, GaussianField, None]
-DECODE_CHUNK = 1 << 18   # pixels decoded at once (images up to 512 x 512 in one piece)
+# pixels decoded at once: a 4096 x 512 float32 layer output (8 MB) stays in the cache for the ReLU and
+# normalisation passes; a 256x192 map in one piece ran ~1.5x slower, with the same bits (rows are
+# independent in the matrix products; tests/methods/test_methods.py checks it)
+DECODE_CHUNK = 4096
 
 
 def _unit(x: torch.Tensor) -> torch.Tensor:

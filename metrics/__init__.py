@@ -26,7 +26,10 @@ Masks (segmentation.py)
   miou(values) -> float | None;  mbiou(values) -> float | None   plain means (None if no value)
 
 LERF-OVS, the LangSplat protocol (lerf.py)
-  lerf_relevancy(pixel_features (H,W,D), query (D,)|(Q,D), negatives (J,D)) -> (H,W)|(Q,H,W)
+  lerf_relevancy(pixel_features (H,W,D), query (D,)|(Q,D), negatives (J,D), *, pixel_norms=None)
+      -> (H,W)|(Q,H,W)
+  pixel_norms(pixel_features (H,W,D), name) -> (H*W,) float64: computed once, passed to both
+      protocols' functions scoring the same map
   lerf_blend(r) -> r' = 0.5 (r + mean30x30(r));  box_mean(r, size=30)
   lerf_mask(r_blend, *, threshold=0.7, window="langsplat") -> bool (H, W)
   majority_smooth(mask, *, radius=3, window="langsplat"|"centered") -> bool (H, W)
@@ -37,7 +40,8 @@ LERF-OVS, the LangSplat protocol (lerf.py)
   CANONICAL_NEGATIVES = ("object", "things", "stuff", "texture")
 
 3D-OVS (ovs3d.py)
-  ovs3d_predict(pixel_features (H,W,D), class_embeddings (C,D)) -> int32 (H, W) argmax of cosine
+  ovs3d_predict(pixel_features (H,W,D), class_embeddings (C,D), *, pixel_norms=None)
+      -> int32 (H, W) argmax of cosine
   resize_nearest(mask, width, height) -> same dtype (height, width), centre sampling (PIL NEAREST)
   ovs3d_view_metrics(pred_labels, gt_masks {class: mask}, class_names, *, dilation_ratio=0.02) -> dict
   evaluate_ovs3d_scene(views: [Ovs3dView(name, pred_labels, gt_masks)], class_names, *,
@@ -58,6 +62,7 @@ from __future__ import annotations
 
 from gsbench.resize import NEAREST_IMPL, resize_nearest
 
+from ._common import pixel_norms
 from .image import PSNR_IMPL, SSIM_IMPL, psnr, quantize_uint8, ssim, ssim_map
 
 from .lerf import (CANONICAL_NEGATIVES, LERF_IMPL, LerfPair, LerfSceneResult, box_mean,  # isort: skip
@@ -110,7 +115,8 @@ __all__ = [
     "find_lpips_weights", "lpips_impl", "LPIPSNet", "LPIPSResult", "iou", "boundary_band", "boundary_width",
     "boundary_iou", "miou", "mbiou", "lerf_relevancy", "lerf_blend", "box_mean", "lerf_mask", "majority_smooth",
     "select_level", "lerf_localization", "evaluate_lerf_scene", "LerfPair", "LerfSceneResult",
-    "CANONICAL_NEGATIVES", "ovs3d_predict", "resize_nearest", "ovs3d_view_metrics", "evaluate_ovs3d_scene",
+    "CANONICAL_NEGATIVES", "ovs3d_predict", "pixel_norms", "resize_nearest", "ovs3d_view_metrics",
+    "evaluate_ovs3d_scene",
     "Ovs3dView", "Ovs3dSceneResult", "mean_adjacent_distance", "adjacent_mask_iou", "adjacent_mask_iou_pairs",
     "time_fps", "PSNR_IMPL", "SSIM_IMPL", "LERF_IMPL", "OVS3D_IMPL", "BIOU_IMPL", "IOU_IMPL", "FPS_IMPL",
     "ORDERING_DISTANCE_IMPL", "ORDERING_MASK_IOU_IMPL", "ORDERING_MASK_IOU_STRICT_IMPL", "ORDERING_MASK_IOU_FLOW_IMPL",

@@ -86,11 +86,27 @@ def unit_rows(a: np.ndarray, name: str, *, zero: str = "error", eps: float = 1e-
     return a / np.where(small, 1.0, n)
 
 
-def pixel_text_cosines(features: Any, texts: np.ndarray, name: str) -> tuple[np.ndarray, tuple[int, int]]:
+def pixel_norms(features: Any, name: str) -> np.ndarray:
+    """L2 norm of every pixel feature of an (H, W, D) map -> (H*W,) float64, summed in float64
+    without an (N, D) temporary. A NaN/inf feature is an InputError. Computed once, it serves every
+    `pixel_text_cosines` call on the same map (evaluation scores 3D-OVS and LERF from one render)."""
+    f = to_numpy(features, name)
+    if f.ndim != 3:
+        raise InputError(f"{name}: expected (H, W, D), got shape {f.shape}")
+    flat = np.ascontiguousarray(f.reshape(-1, f.shape[-1]), dtype=np.float32)
+    sq = np.einsum("ij,ij->i", flat, flat, dtype=np.float64)
+    if not np.all(np.isfinite(sq)):
+        raise InputError(f"{name}: contains NaN or inf")
+    return np.sqrt(sq)
+
+
+def pixel_text_cosines(features: Any, texts: np.ndarray, name: str,
+                       norms: np.ndarray | None = None) -> tuple[np.ndarray, tuple[int, int]]:
     """Cosine of every pixel feature (H, W, D) with every text row (K, D) -> ((H*W, K) float64, (H, W)).
 
     Works on the features in place (float32, no normalised copy: a 985x725x512 map is 1.4 GB).
     A NaN/inf feature is an InputError; a zero feature has cosine 0 with every text.
+    norms: `pixel_norms(features)` when the caller has it already (the same values either way).
     """
     f = to_numpy(features, name)
     if f.ndim != 3:
@@ -98,14 +114,10 @@ def pixel_text_cosines(features: Any, texts: np.ndarray, name: str) -> tuple[np.
     h, w, d = f.shape
     if texts.ndim != 2 or texts.shape[1] != d:
         raise InputError(f"{name}: feature width {d} does not match the text embeddings {texts.shape}")
+    norm = pixel_norms(f, name) if norms is None else np.asarray(norms, np.float64)
+    if norm.shape != (h * w,):
+        raise InputError(f"{name}: {norm.shape} pixel norms for a {h}x{w} map")
     flat = np.ascontiguousarray(f.reshape(-1, d), dtype=np.float32)
-    sq = np.einsum("ij,ij->i", flat, flat, dtype=np.float64)     # no (N, D) temporary
-    if not np.all(np.isfinite(sq)):
-        raise InputError(f"{name}: contains NaN or inf")
-    norm = np.sqrt(sq)
     tu = unit_rows(texts.astype(np.float64), "text embeddings").astype(np.float32)
     dots = (flat @ tu.T).astype(np.float64)
     return np.where(norm[:, None] > 1e-12, dots / np.maximum(norm, 1e-12)[:, None], 0.0), (h, w)
-
-
-

@@ -79,11 +79,15 @@ def _sigmoid(z: np.ndarray) -> np.ndarray:
 
 
 def lerf_relevancy(pixel_features: Any, query_embedding: Any, negative_embeddings: Any, *,
-                   temperature: float = LERF_TEMPERATURE) -> np.ndarray:
+                   temperature: float = LERF_TEMPERATURE, pixel_norms: np.ndarray | None = None) -> np.ndarray:
     """Relevancy r in [0, 1] of each pixel for one query (D,) -> (H, W), or Q queries (Q, D) -> (Q, H, W).
 
     All vectors are L2-normalised first (pixels with a zero feature stay 0: relevancy 0.5).
     softmax(t [a, b])[0] is computed as the sigmoid t (a - b), which cannot overflow.
+    The minimum over the negatives is taken before the sigmoid when t > 0: a - b, t x and the
+    sigmoid are each monotone (also as rounded floating-point operations), so the value is the
+    same with one sigmoid per pixel and query instead of one per negative.
+    pixel_norms: the features' `metrics._common.pixel_norms`, when already computed.
     """
     q = finite_float(query_embedding, "query_embedding")
     single = q.ndim == 1
@@ -94,11 +98,13 @@ def lerf_relevancy(pixel_features: Any, query_embedding: Any, negative_embedding
         raise InputError(f"embeddings must be (D,) / (Q, D) and (J>0, D); got query {q.shape}, negatives {n.shape}")
     unit_rows(q, "query_embedding")          # zero query / negative vectors are errors
     unit_rows(n, "negative_embeddings")
-    cos, (h, w) = pixel_text_cosines(pixel_features, np.concatenate([q, n]), "pixel_features")
+    cos, (h, w) = pixel_text_cosines(pixel_features, np.concatenate([q, n]), "pixel_features", pixel_norms)
     nq = q.shape[0]
     pos, neg = cos[:, :nq], cos[:, nq:]
-    z = temperature * (pos[:, :, None] - neg[:, None, :])  # (HW, Q, J)
-    r = _sigmoid(z).min(axis=2)         # worst case over the negatives
+    if temperature > 0:     # worst case over the negatives: the largest negative cosine
+        r = _sigmoid(temperature * (pos - neg.max(axis=1, keepdims=True)))
+    else:
+        r = _sigmoid(temperature * (pos[:, :, None] - neg[:, None, :])).min(axis=2)  # (HW, Q, J) -> (HW, Q)
     r = r.T.reshape(-1, h, w)
     return r[0] if single else r
 

@@ -29,12 +29,13 @@ OVS3D_IMPL = "3dovs/argmax-cos/v1"
 MISSING_POLICIES = ("error", "skip", "zero")
 
 
-def ovs3d_predict(pixel_features: Any, class_embeddings: Any) -> np.ndarray:
-    """(H, W, D) features, (C, D) class text embeddings -> (H, W) int32 class index (first on ties)."""
+def ovs3d_predict(pixel_features: Any, class_embeddings: Any, *, pixel_norms: np.ndarray | None = None) -> np.ndarray:
+    """(H, W, D) features, (C, D) class text embeddings -> (H, W) int32 class index (first on ties).
+    pixel_norms: the features' `metrics._common.pixel_norms`, when already computed."""
     t = finite_float(class_embeddings, "class_embeddings")
     if t.ndim != 2 or t.shape[0] == 0:
         raise InputError(f"ovs3d_predict: expected class embeddings (C>0, D), got {t.shape}")
-    cos, (h, w) = pixel_text_cosines(pixel_features, t, "pixel_features")
+    cos, (h, w) = pixel_text_cosines(pixel_features, t, "pixel_features", pixel_norms)
     return np.argmax(cos, axis=1).astype(np.int32).reshape(h, w)
 
 

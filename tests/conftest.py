@@ -2,12 +2,31 @@
 session and shared read-only (a test that changes them works on a copy)."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 from tiny import TINY_SCENE_ARGS, TINY_TRAIN_ARGS
 
 from gsbench.cli import main
+
+
+def _share_the_cores_between_xdist_workers() -> None:
+    """Under pytest-xdist (`make test` runs one worker per core), each worker and the processes it
+    starts get cores // workers threads: two workers of two OpenMP threads each on two cores spin
+    against each other (a torch render test ran 18x slower)."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT") or 0)
+    if workers < 2:
+        return
+    n = str(max(1, len(os.sched_getaffinity(0)) // workers))
+    for key in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "GSBENCH_THREADS"):
+        os.environ[key] = n
+    import torch  # lazy: only the thread count is set here
+
+    torch.set_num_threads(int(n))
+
+
+_share_the_cores_between_xdist_workers()
 
 
 @pytest.fixture(scope="session")

@@ -20,7 +20,7 @@ from gsbench.config import setting
 from gsbench.config_keys import QUERY_MODES
 from gsbench.errors import InputError
 from gsbench.metric_table import FRAME_SET_SUFFIX, SEG_BASES, seg_metric
-from gsbench.metrics import lerf, ovs3d
+from gsbench.metrics import lerf, ovs3d, pixel_norms
 
 from .block import Block, to_numpy
 from .frames import eval_settings, ovs3d_downsample, segmentation_camera, size_text, view_name
@@ -67,10 +67,15 @@ def _text(method, texts: list[str], mode: str):
 
 
 def _features_modes(method, cam, modes: tuple) -> dict:
-    """{mode: features as numpy or None} of one camera, from one render where the method allows it."""
+    """{mode: (features as numpy, their pixel norms) or (None, None)} of one camera, from one render
+    where the method allows it; the norms serve both protocols."""
     many = getattr(method, "semantic_features_modes", None)
     feats = many(cam, modes) if many is not None else {m: method.semantic_features(cam, m) for m in modes}
-    return {m: (None if f is None else to_numpy(f)) for m, f in feats.items()}
+    out = {}
+    for m, f in feats.items():
+        f = None if f is None else to_numpy(f)
+        out[m] = (f, None if f is None else pixel_norms(f, "pixel_features"))
+    return out
 
 
 def _camera_key(cam) -> tuple:
@@ -110,16 +115,17 @@ def frame_outputs(method, scene, ids_by_protocol: dict, config: dict, modes: tup
             if p == "3dovs":
                 for m in modes:
                     t = text(list(scene.class_names), m)
-                    f = feats[m]
-                    out[(p, m, i)] = None if f is None or t is None else ovs3d.ovs3d_predict(f, t)
+                    f, norms = feats[m]
+                    out[(p, m, i)] = None if f is None or t is None else ovs3d.ovs3d_predict(f, t, pixel_norms=norms)
             else:
                 masks, boxes = scene_label_masks(scene, i, cam.width, cam.height)
                 queries = list(masks)
                 for m in modes:
-                    f = feats[m]
+                    f, norms = feats[m]
                     rel = None
                     if f is not None and queries:
-                        rel = lerf.lerf_relevancy(f, text(queries, m), text(list(lerf.CANONICAL_NEGATIVES), m))
+                        rel = lerf.lerf_relevancy(f, text(queries, m), text(list(lerf.CANONICAL_NEGATIVES), m),
+                                                  pixel_norms=norms)
                     out[(p, m, i)] = (rel, masks, boxes)
     return out
 

@@ -122,6 +122,20 @@ def test_decoded_features_are_the_same_in_chunks(monkeypatch):
     torch.testing.assert_close(chunked, whole, rtol=1e-6, atol=1e-6)
 
 
+def test_decoding_in_chunks_changes_no_bit_at_the_real_sizes():
+    """Evaluation decodes a map DECODE_CHUNK rows at a time for speed; the default autoencoder's
+    matrix products must give each row the same bits whatever the rows around it, so the scores do
+    not depend on the chunk size (a BLAS that splits the inner sums by row count would fail here)."""
+    from gsbench.methods import base as B
+    torch.manual_seed(1)
+    ae = FeatureAutoencoder(512, 3)
+    z = torch.nn.functional.normalize(torch.randn(3 * B.DECODE_CHUNK + 123, 3), dim=-1)
+    with torch.no_grad():
+        whole = ae.decode(z)
+        chunked = torch.cat([ae.decode(z[k:k + B.DECODE_CHUNK]) for k in range(0, z.shape[0], B.DECODE_CHUNK)])
+    assert torch.equal(chunked, whole)
+
+
 def test_save_load_round_trip(tmp_path):
     m = get_method("gaussiands")()
     m.field = _field(7)

@@ -41,6 +41,33 @@ def test_relevancy_matches_explicit_softmax():
         np.testing.assert_allclose(lerf_relevancy(f, q[k], n), r[k], atol=1e-6)  # float32 matmul
 
 
+def test_min_over_negatives_before_the_sigmoid_is_the_min_of_the_sigmoids_bit_for_bit():
+    """lerf_relevancy takes the largest negative cosine before one sigmoid per (pixel, query); the
+    protocol's form is one sigmoid per negative, then the minimum. Written out here in float64 from
+    the same cosines, the two must agree exactly, ties and saturated pixels included."""
+    from gsbench.metrics import pixel_norms
+    from gsbench.metrics._common import pixel_text_cosines
+    rng = np.random.default_rng(7)
+    f = rng.standard_normal((40, 50, 8)).astype(np.float32)
+    f[0, :5] = 0.0                                                    # no feature: cosine 0 with all
+    q, n = rng.standard_normal((3, 8)), rng.standard_normal((4, 8))
+    n[1] = n[0]                                                       # a tie among the negatives
+    q[2] = 40 * n[2]                                                  # a query equal to a negative
+    cos, _ = pixel_text_cosines(f, np.concatenate([q, n]), "f")
+    for t in (10.0, 1e3, 0.25):
+        z = t * (cos[:, :3, None] - cos[:, None, 3:])
+        e = np.exp(-np.abs(z))
+        old = np.where(z >= 0, 1.0 / (1.0 + e), e / (1.0 + e)).min(axis=2).T.reshape(3, 40, 50)
+        np.testing.assert_array_equal(lerf_relevancy(f, q, n, temperature=t), old)
+        np.testing.assert_array_equal(lerf_relevancy(f, q, n, temperature=t, pixel_norms=pixel_norms(f, "f")), old)
+    z = -2.0 * (cos[:, :3, None] - cos[:, None, 3:])                 # t < 0: the minimum moves, the rule holds
+    e = np.exp(-np.abs(z))
+    old = np.where(z >= 0, 1.0 / (1.0 + e), e / (1.0 + e)).min(axis=2).T.reshape(3, 40, 50)
+    np.testing.assert_array_equal(lerf_relevancy(f, q, n, temperature=-2.0), old)
+    with pytest.raises(InputError, match="pixel norms"):
+        lerf_relevancy(f, q, n, pixel_norms=np.ones(7))
+
+
 def test_box_mean_window_and_blend():
     rng = np.random.default_rng(1)
     r = rng.random((50, 60))

@@ -9,14 +9,19 @@ before the harness took over the loop (the methods' own fit() loops), and the ha
 it exactly. It was rewritten, with the loop unchanged, when the cpu rasterizer's arithmetic changed
 (its vectorised exp and pixel sums): vanilla's log then moved by at most 1e-7 relative, and on this
 tiny scene the thresholded semantic metrics moved by up to 0.004 (absolute).
+
+The runs use 2 threads, whatever the machine or the pytest-xdist worker count: torch's and the cpu
+rasterizer's sums depend on the thread count in their last bits, and the file was written with 2.
 """
 from __future__ import annotations
 
 import json
+import os
 import sys
 import tempfile
 from pathlib import Path
 
+import torch
 from tiny import TINY_SCENE_ARGS, TINY_SET
 
 from gsbench.cli import main
@@ -26,6 +31,7 @@ from gsbench.runs import train_run
 from gsbench.store import read_jsonl
 
 METHODS = ("vanilla", "twostage", "grouping", "gaussiands")
+THREADS = 2
 SET = [*TINY_SET, "train.eval_every=10", "train.eval_views=2", "train.checkpoint_every=10",
        "twostage.semantic_iterations=10"]
 
@@ -36,6 +42,20 @@ def _numbers(d: dict) -> dict:
 
 def golden_runs(work: Path) -> dict:
     """{method: {"metrics": results.json metrics, "log": train_log.jsonl lines without wall times}}."""
+    before_env, before = os.environ.get("GSBENCH_THREADS"), torch.get_num_threads()
+    os.environ["GSBENCH_THREADS"] = str(THREADS)  # training's thread count
+    torch.set_num_threads(THREADS)  # evaluation's
+    try:
+        return _golden_runs(work)
+    finally:
+        torch.set_num_threads(before)
+        if before_env is None:
+            os.environ.pop("GSBENCH_THREADS", None)
+        else:
+            os.environ["GSBENCH_THREADS"] = before_env
+
+
+def _golden_runs(work: Path) -> dict:
     scene = work / "scene"
     assert main(["make-scene", *TINY_SCENE_ARGS, "--out", str(scene), "--quiet"]) == 0
     out = {}
