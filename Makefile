@@ -30,7 +30,7 @@ demo: install
 	bash scripts/demo.sh $(VENV) $(DEMO)
 
 test: install
-	$(VENV)/bin/pytest -q -n auto --dist worksteal $(PYTEST_ARGS)
+	$(VENV)/bin/pytest -q -n auto --dist worksteal --durations=10 $(PYTEST_ARGS)
 
 # ruff's rules and line length are set in pyproject.toml ([tool.ruff]).
 lint: install

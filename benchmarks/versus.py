@@ -7,8 +7,11 @@ Each side (a commit exported with `git archive`, or a copy of a working tree's f
 ignore) is copied into its own folder under --work as its pyproject.toml maps the package
 (package-dir), and run with this venv's Python and packages, so both sides use the same torch, numba
 and numpy. Every number comes from that side's own code and its own benchmark scripts:
-- `cpu` render fwd+bwd ms: `benchmarks/render_cpu.py --scenes WxH/N` (random Gaussians, 3 feature
-  channels; projection, rasterization and their backward; best of the repeats);
+- `cpu` render fwd+bwd ms: `benchmarks/render_cpu.py --scenes WxH/N` (random Gaussians a pixel or
+  two wide, 3 feature channels; projection, rasterization and their backward; best of the repeats);
+- `cpu` render on the training scene: `benchmarks/raster_scene.py` (this working tree's copy) saves
+  train_speed's initial field once (N random-init Gaussians of tabletop-small at WxH) and times each
+  side's `render()` on it, the sides alternating for three rounds, each side's best kept;
 - bare step, vanilla and gaussiands it/s: `benchmarks/train_speed.py --sizes N@WxH`;
 - cpu-medium: `gsbench train --method gaussiands --preset cpu-medium --set priors.masks.provider=gt`
   on a tabletop-medium scene (generated once, seed 0, by the head side), then `gsbench eval`:
@@ -115,8 +118,30 @@ def measure(src: Path, site: Path, label: str, size: str, scene: Path | None, wo
     return out
 
 
+def raster_rounds(sides: list, size: str, work: Path, rounds: int = 3) -> list[dict]:
+    """Per side {"scene_fwd_ms", "scene_fwdbwd_ms"}: raster_scene.py's timing of that side's render()
+    on one saved training field, the sides alternating, the best of the rounds."""
+    script = REPO / "benchmarks" / "raster_scene.py"
+    field = work / f"raster-field-{size.replace('@', '_')}.pt"
+    head_site = sides[-1][1]
+    if not field.exists():
+        _run([sys.executable, str(script), "--make", str(field), "--size", size],
+             dict(os.environ, PYTHONPATH=str(head_site)), work, work / "raster-make.log")
+    best: list[dict] = [{} for _ in sides]
+    for k in range(rounds):
+        for j, (_src, site, label) in enumerate(sides):
+            out = _run([sys.executable, str(script), "--time", str(field)],
+                       dict(os.environ, PYTHONPATH=str(site)), work, work / f"raster-{label.split()[0]}-{k}.log")
+            r = json.loads(out.strip().splitlines()[-1])
+            for key in ("fwd_ms", "fwdbwd_ms"):
+                best[j][f"scene_{key}"] = min(best[j].get(f"scene_{key}", float("inf")), r[key])
+    return best
+
+
 def table(base: dict, head: dict) -> str:
     rows = [("cpu render fwd ms", "render_fwd_ms", True), ("cpu render fwd+bwd ms", "render_fwdbwd_ms", True),
+            ("cpu render fwd ms, training scene", "scene_fwd_ms", True),
+            ("cpu render fwd+bwd ms, training scene", "scene_fwdbwd_ms", True),
             ("bare step it/s", "bare_its", False), ("vanilla it/s", "vanilla_its", False),
             ("gaussiands it/s", "gaussiands_its", False), ("cpu-medium train_s", "train_s", True),
             ("cpu-medium eval_s", "eval_s", True), ("cpu-medium eval wall s", "eval_wall_s", True)]
@@ -163,6 +188,9 @@ def main(argv: list[str] | None = None) -> int:
     for src, site, label in sides:
         print(f"versus: measuring {label}", file=sys.stderr, flush=True)
         results.append(measure(src, site, label, a.size, scene, work))
+    print("versus: the rasterizer on the training scene, sides alternating", file=sys.stderr, flush=True)
+    for r, extra in zip(results, raster_rounds(sides, a.size, work)):
+        r.update(extra)
     print(table(*results))
     if a.json:
         Path(a.json).write_text(json.dumps(results, indent=1) + "\n")

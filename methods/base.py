@@ -37,6 +37,7 @@ from gsbench.gaussians import GaussianField
 from gsbench.methods.autoencoder import FeatureAutoencoder
 from gsbench.methods.common import resolve_render_backend
 from gsbench.methods.device import prepare_backend, resolve_backend_for
+from gsbench.methods.feature_blocks import FeatureBlocks
 from gsbench.methods.registry import get_method
 from gsbench.methods.residency import DEVICE, data_on, place
 from gsbench.methods.trainer import Trainer, TrainViews, init_field
@@ -47,10 +48,6 @@ from gsbench.store import load_torch, save_torch_atomic
 
 # what train_phases returns: yields each phase's Trainer, receives that phase's final field
 Phases = Generator[Trainer, GaussianField, None]
-# pixels decoded at once: a 4096 x 512 float32 layer output (8 MB) stays in the cache for the ReLU and
-# normalisation passes; a 256x192 map in one piece ran ~1.5x slower, with the same bits (rows are
-# independent in the matrix products; tests/methods/test_methods.py checks it)
-DECODE_CHUNK = 4096
 
 
 def _unit(x: torch.Tensor) -> torch.Tensor:
@@ -141,28 +138,24 @@ class Method:
         return self.semantic_features_modes(camera, (mode,))[mode]
 
     def semantic_features_modes(self, camera: Camera, modes: tuple) -> dict:
-        """{mode: semantic_features(camera, mode)} from one render; decoded only when "decode" is asked
-        (evaluation scores every query mode of a frame from this one render)."""
+        """{mode: semantic_features(camera, mode)} from one render: `semantic_feature_blocks` put together."""
+        return {m: None if b is None else b.join() for m, b in self.semantic_feature_blocks(camera, modes).items()}
+
+    def semantic_feature_blocks(self, camera: Camera, modes: tuple) -> dict:
+        """{mode: FeatureBlocks or None} from one render, what evaluation scores: the rendered latents
+        (encode, one block) and their decoding, done a block of pixels at a time as the blocks are
+        read (decode), so the whole 512-d map is never held."""
         for m in modes:
             _check_mode(m)
         if not self.has_semantics:
             return {m: None for m in modes}
         feats = self.render(camera).features
-        return {m: feats if m == "encode" else self._decode(feats) for m in modes}
+        return {m: FeatureBlocks.of_map(feats, None if m == "encode" else self._decode_rows) for m in modes}
 
-    def _decode(self, feats: torch.Tensor) -> torch.Tensor:
-        """Decode an (H, W, d) latent map to the feature space, in row chunks: the decoder's last layers
-        hold ~3 KB per pixel at once."""
+    def _decode_rows(self, rows: torch.Tensor) -> torch.Tensor:
+        """(n, d) latents -> (n, 512) decoded unit features."""
         with torch.no_grad():
-            flat = feats.reshape(-1, feats.shape[-1])
-            first = self.autoencoder.decode(flat[:DECODE_CHUNK])
-            if flat.shape[0] <= DECODE_CHUNK:
-                return first.reshape(feats.shape[0], feats.shape[1], -1)
-            out = torch.empty(flat.shape[0], first.shape[1], dtype=first.dtype, device=first.device)
-            out[:DECODE_CHUNK] = first
-            for k in range(DECODE_CHUNK, flat.shape[0], DECODE_CHUNK):
-                out[k:k + DECODE_CHUNK] = self.autoencoder.decode(flat[k:k + DECODE_CHUNK])
-            return out.reshape(feats.shape[0], feats.shape[1], -1)
+            return self.autoencoder.decode(rows)
 
     def feature_provider(self):
         if self._feature_provider is None:

@@ -37,6 +37,7 @@ from gsbench.errors import InputError
 from gsbench.gaussians import SH_C0
 from gsbench.methods.base import Method, Phases, _check_mode, _unit, load_views, scene_init
 from gsbench.methods.common import fit_priors, uses
+from gsbench.methods.feature_blocks import FeatureBlocks
 from gsbench.methods.grouping_spec import budget
 from gsbench.methods.losses import reconstruction_loss
 from gsbench.methods.residency import data_on, place
@@ -134,15 +135,16 @@ class GaussianGrouping(Method):
         with torch.no_grad():
             return self.classifier(identity).argmax(-1)
 
-    def semantic_features_modes(self, camera, modes: tuple) -> dict:
-        """{mode: (H, W, 512)}: the feature of the track each pixel's rendered identity classifies into,
-        the same for both modes (no autoencoder), from one render."""
+    def semantic_feature_blocks(self, camera, modes: tuple) -> dict:
+        """{mode: FeatureBlocks of (H, W, 512)}: the feature of the track each pixel's rendered identity
+        classifies into, a block of pixels at a time, the same for both modes (no autoencoder), from
+        one render."""
         for m in modes:
             _check_mode(m)
         if not self.has_semantics:
             return {m: None for m in modes}
-        feats = self.table[self.classify(self.render(camera).features)]
-        return {m: feats for m in modes}
+        blocks = FeatureBlocks.of_map(self.render(camera).features, lambda ids: self.table[self.classify(ids)])
+        return {m: blocks for m in modes}
 
     def embed_text(self, texts: list[str], mode: str = "encode") -> Optional[torch.Tensor]:
         """(Q, 512) unit text embeddings of the feature provider (both modes: the tracks' feature space)."""

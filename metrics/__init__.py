@@ -30,6 +30,9 @@ LERF-OVS, the LangSplat protocol (lerf.py)
       -> (H,W)|(Q,H,W)
   pixel_norms(pixel_features (H,W,D), name) -> (H*W,) float64: computed once, passed to both
       protocols' functions scoring the same map
+  pixel_text_cosines(pixel_features (H,W,D), texts (K,D), name, norms=None) -> ((H*W, K) float64, (H, W))
+  lerf_texts(query, negatives) -> ((Q+J, D), Q, single);  relevancy_from_cosines(cos, Q, H, W) -> (Q,H,W)
+      lerf_relevancy in two steps, for cosines computed a block of pixels at a time
   lerf_blend(r) -> r' = 0.5 (r + mean30x30(r));  box_mean(r, size=30)
   lerf_mask(r_blend, *, threshold=0.7, window="langsplat") -> bool (H, W)
   majority_smooth(mask, *, radius=3, window="langsplat"|"centered") -> bool (H, W)
@@ -42,6 +45,8 @@ LERF-OVS, the LangSplat protocol (lerf.py)
 3D-OVS (ovs3d.py)
   ovs3d_predict(pixel_features (H,W,D), class_embeddings (C,D), *, pixel_norms=None)
       -> int32 (H, W) argmax of cosine
+  class_texts(class_embeddings) -> (C, D);  ovs3d_labels(cos (H*W, C), H, W) -> int32 (H, W)
+      ovs3d_predict in two steps
   resize_nearest(mask, width, height) -> same dtype (height, width), centre sampling (PIL NEAREST)
   ovs3d_view_metrics(pred_labels, gt_masks {class: mask}, class_names, *, dilation_ratio=0.02) -> dict
   evaluate_ovs3d_scene(views: [Ovs3dView(name, pred_labels, gt_masks)], class_names, *,
@@ -62,17 +67,18 @@ from __future__ import annotations
 
 from gsbench.resize import NEAREST_IMPL, resize_nearest
 
-from ._common import pixel_norms
+from ._common import pixel_norms, pixel_text_cosines
 from .image import PSNR_IMPL, SSIM_IMPL, psnr, quantize_uint8, ssim, ssim_map
 
 from .lerf import (CANONICAL_NEGATIVES, LERF_IMPL, LerfPair, LerfSceneResult, box_mean,  # isort: skip
-                   evaluate_lerf_scene, lerf_blend, lerf_localization, lerf_mask, lerf_relevancy, majority_smooth,
-                   select_level)
+                   evaluate_lerf_scene, lerf_blend, lerf_localization, lerf_mask, lerf_relevancy, lerf_texts,
+                   majority_smooth, relevancy_from_cosines, select_level)
 from .ordering import (ORDERING_DISTANCE_IMPL, ORDERING_MASK_IOU_FLOW_IMPL, ORDERING_MASK_IOU_IMPL,  # isort: skip
                        ORDERING_MASK_IOU_STRICT_IMPL, adjacent_mask_iou, adjacent_mask_iou_flow,
                        adjacent_mask_iou_pairs, adjacent_mask_iou_strict, mean_adjacent_distance)
 from .ovs3d import (OVS3D_IMPL, PIXEL_ACC_IMPL, PIXEL_ACC_RULES, Ovs3dSceneResult, Ovs3dView,  # isort: skip
-                    evaluate_ovs3d_scene, ovs3d_predict, ovs3d_view_metrics, pixel_accuracy)
+                    class_texts, evaluate_ovs3d_scene, ovs3d_labels, ovs3d_predict, ovs3d_view_metrics,
+                    pixel_accuracy)
 from .perceptual import (LPIPS_RANGES, LPIPSNet, LPIPSResult, build_lpips_network, find_lpips_weights,  # isort: skip
                          load_lpips, lpips, lpips_impl)
 from .segmentation import BIOU_IMPL, IOU_IMPL, boundary_band, boundary_iou, boundary_width, iou, mbiou, miou
@@ -115,7 +121,8 @@ __all__ = [
     "find_lpips_weights", "lpips_impl", "LPIPSNet", "LPIPSResult", "iou", "boundary_band", "boundary_width",
     "boundary_iou", "miou", "mbiou", "lerf_relevancy", "lerf_blend", "box_mean", "lerf_mask", "majority_smooth",
     "select_level", "lerf_localization", "evaluate_lerf_scene", "LerfPair", "LerfSceneResult",
-    "CANONICAL_NEGATIVES", "ovs3d_predict", "pixel_norms", "resize_nearest", "ovs3d_view_metrics",
+    "CANONICAL_NEGATIVES", "ovs3d_predict", "pixel_norms", "pixel_text_cosines", "lerf_texts",
+    "relevancy_from_cosines", "class_texts", "ovs3d_labels", "resize_nearest", "ovs3d_view_metrics",
     "evaluate_ovs3d_scene",
     "Ovs3dView", "Ovs3dSceneResult", "mean_adjacent_distance", "adjacent_mask_iou", "adjacent_mask_iou_pairs",
     "time_fps", "PSNR_IMPL", "SSIM_IMPL", "LERF_IMPL", "OVS3D_IMPL", "BIOU_IMPL", "IOU_IMPL", "FPS_IMPL",

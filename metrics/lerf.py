@@ -89,6 +89,15 @@ def lerf_relevancy(pixel_features: Any, query_embedding: Any, negative_embedding
     same with one sigmoid per pixel and query instead of one per negative.
     pixel_norms: the features' `metrics._common.pixel_norms`, when already computed.
     """
+    texts, nq, single = lerf_texts(query_embedding, negative_embeddings)
+    cos, (h, w) = pixel_text_cosines(pixel_features, texts, "pixel_features", pixel_norms)
+    r = relevancy_from_cosines(cos, nq, h, w, temperature=temperature)
+    return r[0] if single else r
+
+
+def lerf_texts(query_embedding: Any, negative_embeddings: Any) -> tuple[np.ndarray, int, bool]:
+    """(queries then negatives as one (Q + J, D) float64 array, Q, whether one (D,) query was given);
+    InputError for a non-finite, zero or mis-shaped embedding."""
     q = finite_float(query_embedding, "query_embedding")
     single = q.ndim == 1
     q = q[None] if single else q
@@ -98,15 +107,19 @@ def lerf_relevancy(pixel_features: Any, query_embedding: Any, negative_embedding
         raise InputError(f"embeddings must be (D,) / (Q, D) and (J>0, D); got query {q.shape}, negatives {n.shape}")
     unit_rows(q, "query_embedding")          # zero query / negative vectors are errors
     unit_rows(n, "negative_embeddings")
-    cos, (h, w) = pixel_text_cosines(pixel_features, np.concatenate([q, n]), "pixel_features", pixel_norms)
-    nq = q.shape[0]
-    pos, neg = cos[:, :nq], cos[:, nq:]
+    return np.concatenate([q, n]), q.shape[0], single
+
+
+def relevancy_from_cosines(cosines: np.ndarray, n_queries: int, height: int, width: int, *,
+                           temperature: float = LERF_TEMPERATURE) -> np.ndarray:
+    """(H*W, Q + J) cosines with the `lerf_texts` rows -> (Q, H, W) relevancy: `lerf_relevancy` from
+    cosines computed elsewhere (evaluation computes them a block of pixels at a time)."""
+    pos, neg = cosines[:, :n_queries], cosines[:, n_queries:]
     if temperature > 0:     # worst case over the negatives: the largest negative cosine
         r = _sigmoid(temperature * (pos - neg.max(axis=1, keepdims=True)))
     else:
         r = _sigmoid(temperature * (pos[:, :, None] - neg[:, None, :])).min(axis=2)  # (HW, Q, J) -> (HW, Q)
-    r = r.T.reshape(-1, h, w)
-    return r[0] if single else r
+    return r.T.reshape(-1, height, width)
 
 
 def box_mean(r: Any, size: int = LERF_BLEND_KERNEL) -> np.ndarray:

@@ -32,11 +32,22 @@ MISSING_POLICIES = ("error", "skip", "zero")
 def ovs3d_predict(pixel_features: Any, class_embeddings: Any, *, pixel_norms: np.ndarray | None = None) -> np.ndarray:
     """(H, W, D) features, (C, D) class text embeddings -> (H, W) int32 class index (first on ties).
     pixel_norms: the features' `metrics._common.pixel_norms`, when already computed."""
+    cos, (h, w) = pixel_text_cosines(pixel_features, class_texts(class_embeddings), "pixel_features", pixel_norms)
+    return ovs3d_labels(cos, h, w)
+
+
+def class_texts(class_embeddings: Any) -> np.ndarray:
+    """The (C > 0, D) class text embeddings as a finite float64 array (InputError otherwise)."""
     t = finite_float(class_embeddings, "class_embeddings")
     if t.ndim != 2 or t.shape[0] == 0:
         raise InputError(f"ovs3d_predict: expected class embeddings (C>0, D), got {t.shape}")
-    cos, (h, w) = pixel_text_cosines(pixel_features, t, "pixel_features", pixel_norms)
-    return np.argmax(cos, axis=1).astype(np.int32).reshape(h, w)
+    return t
+
+
+def ovs3d_labels(cosines: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(H*W, C) pixel-class cosines -> (H, W) int32 class index (first on ties): `ovs3d_predict` from
+    cosines computed elsewhere (evaluation computes them a block of pixels at a time)."""
+    return np.argmax(cosines, axis=1).astype(np.int32).reshape(height, width)
 
 
 PIXEL_ACC_RULES = ("reference", "labelled")

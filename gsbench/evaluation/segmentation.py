@@ -5,9 +5,10 @@ latents decoded to CLIP space); each mode's metric ids end in "+query-<mode>". T
 names carry the configured `query.mode`. Frame sets: see gsbench.evaluation.frames.
 
 Each scored frame is rendered once for every protocol and query mode (`frame_outputs`): the
-rendered latents serve the encode mode, their decoding (done once per frame, only when the decode
-mode is scored) serves the decode mode, and each protocol keeps only its small per-frame result
-(3D-OVS class map, LERF relevancy maps) before the next frame is rendered.
+rendered latents serve the encode mode, their decoding (only when the decode mode is scored, a
+block of pixels at a time, each block scored against every protocol's texts while it is in the
+cache) serves the decode mode, and each protocol keeps only its small per-frame result (3D-OVS
+class map, LERF relevancy maps) before the next frame is rendered.
 """
 from __future__ import annotations
 
@@ -15,12 +16,14 @@ import logging
 from typing import Optional
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from gsbench.config import setting
 from gsbench.config_keys import QUERY_MODES
 from gsbench.errors import InputError
+from gsbench.methods.feature_blocks import FeatureBlocks
 from gsbench.metric_table import FRAME_SET_SUFFIX, SEG_BASES, seg_metric
-from gsbench.metrics import lerf, ovs3d, pixel_norms
+from gsbench.metrics import lerf, ovs3d, pixel_norms, pixel_text_cosines
 
 from .block import Block, to_numpy
 from .frames import eval_settings, ovs3d_downsample, segmentation_camera, size_text, view_name
@@ -66,16 +69,30 @@ def _text(method, texts: list[str], mode: str):
     return None if t is None else to_numpy(t)
 
 
-def _features_modes(method, cam, modes: tuple) -> dict:
-    """{mode: (features as numpy, their pixel norms) or (None, None)} of one camera, from one render
-    where the method allows it; the norms serve both protocols."""
-    many = getattr(method, "semantic_features_modes", None)
-    feats = many(cam, modes) if many is not None else {m: method.semantic_features(cam, m) for m in modes}
+def _feature_blocks(method, cam, modes: tuple) -> dict:
+    """{mode: FeatureBlocks or None} of one camera, from one render (`semantic_feature_blocks`); a
+    method without it gives whole maps, one `semantic_features` call per mode."""
+    many = getattr(method, "semantic_feature_blocks", None)
+    if many is not None:
+        return many(cam, modes)
     out = {}
-    for m, f in feats.items():
-        f = None if f is None else to_numpy(f)
-        out[m] = (f, None if f is None else pixel_norms(f, "pixel_features"))
+    for m in modes:
+        f = method.semantic_features(cam, m)
+        out[m] = None if f is None else FeatureBlocks.of_map(f)
     return out
+
+
+def _cosines(blocks: FeatureBlocks, groups: dict) -> dict:
+    """{group: (H*W, K) cosines of every pixel with the group's (K, D) texts}, from one pass over the
+    blocks: each block's pixel norms serve every group, and a decoded block is scored while it is in
+    the cache (the values are those of the whole map: every pixel is on its own)."""
+    parts: dict = {g: [] for g in groups}
+    for b in blocks.blocks():
+        b = to_numpy(b)[None]                    # (1, n, D)
+        norms = pixel_norms(b, "pixel_features")
+        for g, t in groups.items():
+            parts[g].append(pixel_text_cosines(b, t, "pixel_features", norms)[0])
+    return {g: np.concatenate(p) for g, p in parts.items()}
 
 
 def _camera_key(cam) -> tuple:
@@ -88,7 +105,7 @@ def frame_outputs(method, scene, ids_by_protocol: dict, config: dict, modes: tup
 
     3dovs: the predicted class map (None without features); lerf: (relevancy (Q, H, W) or None,
     GT masks, GT boxes). Frames are visited one at a time; each distinct camera is rendered once for
-    all protocols and modes and its features are dropped before the next frame.
+    all protocols and modes, and its features are scored a block of pixels at a time.
     """
     text_memo: dict = {}
 
@@ -103,30 +120,38 @@ def frame_outputs(method, scene, ids_by_protocol: dict, config: dict, modes: tup
         for i in ids:
             if p not in need.setdefault(i, []):
                 need[i].append(p)
+    # numpy's BLAS on one thread: its block products are small, and its spinning threads took the
+    # cores from torch's decoder running between them (2.5x slower layers; the same bits either way)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _frame_outputs(method, scene, need, config, modes, text)
+
+
+def _frame_outputs(method, scene, need: dict, config: dict, modes: tuple, text) -> dict:
+    """`frame_outputs` of the frames in need ({view id: protocols}); text(texts, mode) embeds, memoised."""
     out = {}
     for i in sorted(need):
-        by_cam: dict = {}
+        by_cam: dict = {}                        # camera key -> (camera, protocols scoring at it)
         for p in need[i]:
             cam = segmentation_camera(scene, i, p, config)
-            key = _camera_key(cam)
-            if key not in by_cam:
-                by_cam[key] = _features_modes(method, cam, modes)
-            feats = by_cam[key]
-            if p == "3dovs":
-                for m in modes:
-                    t = text(list(scene.class_names), m)
-                    f, norms = feats[m]
-                    out[(p, m, i)] = None if f is None or t is None else ovs3d.ovs3d_predict(f, t, pixel_norms=norms)
-            else:
-                masks, boxes = scene_label_masks(scene, i, cam.width, cam.height)
-                queries = list(masks)
-                for m in modes:
-                    f, norms = feats[m]
-                    rel = None
-                    if f is not None and queries:
-                        rel = lerf.lerf_relevancy(f, text(queries, m), text(list(lerf.CANONICAL_NEGATIVES), m),
-                                                  pixel_norms=norms)
-                    out[(p, m, i)] = (rel, masks, boxes)
+            by_cam.setdefault(_camera_key(cam), (cam, []))[1].append(p)
+        for cam, protocols in by_cam.values():
+            blocks = _feature_blocks(method, cam, modes)
+            masks, boxes = scene_label_masks(scene, i, cam.width, cam.height) if "lerf" in protocols else ({}, {})
+            queries = list(masks)
+            for m in modes:
+                groups = {}
+                if "3dovs" in protocols and text(list(scene.class_names), m) is not None:
+                    groups["3dovs"] = ovs3d.class_texts(text(list(scene.class_names), m))
+                if "lerf" in protocols and queries and text(queries, m) is not None:
+                    groups["lerf"] = lerf.lerf_texts(text(queries, m), text(list(lerf.CANONICAL_NEGATIVES), m))[0]
+                cos = _cosines(blocks[m], groups) if blocks[m] is not None and groups else {}
+                if "3dovs" in protocols:
+                    out[("3dovs", m, i)] = (ovs3d.ovs3d_labels(cos["3dovs"], cam.height, cam.width)
+                                            if "3dovs" in cos else None)
+                if "lerf" in protocols:
+                    rel = (lerf.relevancy_from_cosines(cos["lerf"], len(queries), cam.height, cam.width)
+                           if "lerf" in cos else None)
+                    out[("lerf", m, i)] = (rel, masks, boxes)
     return out
 
 

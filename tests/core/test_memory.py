@@ -61,6 +61,9 @@ base:
     train.densify.enabled: false
     train.densify.max_gaussians: 1000000
     train.eval_every: 0
+    eval.fps_warmup: 0        # the peaks come from holding and rendering the Gaussians, not from timing them
+    eval.fps_repeats: 1
+    eval.previews: 0
 scenes: [{preset: tabletop-small, views: 6, resolution: [32, 24]}]
 seeds: [0]
 axes:

@@ -1,5 +1,6 @@
-"""Evaluation renders each frame once for every protocol and query mode; the metrics must equal
-those of the earlier flow, which rendered (and decoded) once per protocol, frame set and mode."""
+"""Evaluation renders each frame once for every protocol and query mode and scores its features a
+block of pixels at a time; the metrics must equal those of the earlier flow, which rendered (and
+decoded whole maps) once per protocol, frame set and mode."""
 from __future__ import annotations
 
 import pytest
@@ -10,14 +11,15 @@ TINY = ["backend=cpu", "train.iterations=12", "train.max_width=32", "train.eval_
 
 
 class _Counting:
-    """A method wrapper counting renders and decodes; `per_call` hides semantic_features_modes, so the
-    scorer falls back to one semantic_features call (one render, one decode) per mode, as before."""
+    """A method wrapper counting renders and decodes; `per_call` hides semantic_feature_blocks, so the
+    scorer falls back to one semantic_features call (one render, one whole decoded map) per mode, as
+    before."""
 
     def __init__(self, method, per_call: bool):
         self.m, self.renders, self.decodes, self.per_call = method, 0, 0, per_call
 
     def __getattr__(self, name):
-        if name == "semantic_features_modes" and self.per_call:
+        if name == "semantic_feature_blocks" and self.per_call:
             raise AttributeError(name)
         return getattr(self.m, name)
 
@@ -26,10 +28,10 @@ class _Counting:
         self.decodes += mode == "decode"
         return self.m.semantic_features(cam, mode)
 
-    def semantic_features_modes(self, cam, modes):
+    def semantic_feature_blocks(self, cam, modes):
         self.renders += 1
         self.decodes += "decode" in modes
-        return self.m.semantic_features_modes(cam, modes)
+        return self.m.semantic_feature_blocks(cam, modes)
 
 
 def _old_flow(method, scene, protocols, sets, config):

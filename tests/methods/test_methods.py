@@ -105,7 +105,7 @@ def test_methods_without_semantics_return_none():
 def test_decoded_features_are_the_same_in_chunks(monkeypatch):
     """Decode mode decodes in row chunks (memory at full size); chunking must not change any pixel."""
     from gsbench.camera import Camera
-    from gsbench.methods import base as B
+    from gsbench.methods import feature_blocks as FB
     from gsbench.render import RenderOutput
     m = get_method("gaussiands")()
     m.field = _field(5)
@@ -116,24 +116,25 @@ def test_decoded_features_are_the_same_in_chunks(monkeypatch):
                                                               torch.ones(12, 16)))
     cam = Camera(np.array([[20.0, 0, 8], [0, 20, 6], [0, 0, 1]]), np.eye(4), 16, 12)
     whole = m.autoencoder.decode(feats.reshape(-1, 3)).reshape(12, 16, 16)
-    monkeypatch.setattr(B, "DECODE_CHUNK", 7)          # 192 pixels in 28 chunks, the last one partial
+    monkeypatch.setattr(FB, "BLOCK_ROWS", 7)            # 192 pixels in 28 blocks, the last one partial
     chunked = m.semantic_features(cam, "decode")
     assert chunked.shape == (12, 16, 16)
     torch.testing.assert_close(chunked, whole, rtol=1e-6, atol=1e-6)
 
 
 def test_decoding_in_chunks_changes_no_bit_at_the_real_sizes():
-    """Evaluation decodes a map DECODE_CHUNK rows at a time for speed; the default autoencoder's
+    """Evaluation decodes a map BLOCK_ROWS pixels at a time for speed; the default autoencoder's
     matrix products must give each row the same bits whatever the rows around it, so the scores do
     not depend on the chunk size (a BLAS that splits the inner sums by row count would fail here)."""
-    from gsbench.methods import base as B
+    from gsbench.methods.feature_blocks import BLOCK_ROWS, FeatureBlocks
     torch.manual_seed(1)
     ae = FeatureAutoencoder(512, 3)
-    z = torch.nn.functional.normalize(torch.randn(3 * B.DECODE_CHUNK + 123, 3), dim=-1)
+    z = torch.nn.functional.normalize(torch.randn(3, BLOCK_ROWS + 41, 3), dim=-1)   # 3 blocks, the last partial
     with torch.no_grad():
-        whole = ae.decode(z)
-        chunked = torch.cat([ae.decode(z[k:k + B.DECODE_CHUNK]) for k in range(0, z.shape[0], B.DECODE_CHUNK)])
-    assert torch.equal(chunked, whole)
+        whole = ae.decode(z.reshape(-1, 3)).reshape(3, BLOCK_ROWS + 41, 512)
+        blocks = FeatureBlocks.of_map(z, ae.decode)
+        assert [b.shape[0] for b in blocks.blocks()] == [BLOCK_ROWS, BLOCK_ROWS, BLOCK_ROWS, 123]
+        assert torch.equal(blocks.join(), whole)
 
 
 def test_save_load_round_trip(tmp_path):

@@ -21,3 +21,20 @@ def test_table_ratios_point_the_right_way():
     assert "| cpu-medium train+eval s | 100.0 | 40.0 | 2.50x |" in t
     assert "| psnr | 25.0000 | 25.1000 | |" in t
     assert "bare step" not in t                                             # absent on both sides: no row
+
+
+def test_raster_scene_saves_a_field_and_times_it(tmp_path):
+    """raster_scene.py: --make writes train_speed's initial field and cameras, --time renders them
+    (forward and forward+backward) and reports positive times; versus.py times both sides with it."""
+    import json
+
+    mod = load_benchmark("raster_scene")
+    f = tmp_path / "field.pt"
+    assert mod.main(["--make", str(f), "--size", "300@32x24"]) == 0
+    import torch
+    d = torch.load(f, weights_only=False)
+    assert d["field"]["means"].shape == (300, 3) and d["field"]["features"].shape == (300, 3)
+    assert len(d["cameras"]) == 3 and all(c[2:] == (32, 24) for c in d["cameras"])
+    r = mod.time_file(f, repeats=1)
+    assert r["fwd_ms"] > 0 and r["fwdbwd_ms"] > 0 and r["size"] == "300@32x24"
+    json.dumps(r)
