@@ -137,6 +137,20 @@ def test_decoding_in_chunks_changes_no_bit_at_the_real_sizes():
         assert torch.equal(blocks.join(), whole)
 
 
+def test_feature_blocks_cover_the_map_once_in_pixel_order():
+    """Without a function a map is one block (no copy); with one, blocks of BLOCK_ROWS pixels in order,
+    each computed when read, and join() gives the whole (H, W, D) map."""
+    from gsbench.methods.feature_blocks import FeatureBlocks
+    x = torch.arange(2 * 5 * 3, dtype=torch.float32).reshape(2, 5, 3)
+    one = list(FeatureBlocks.of_map(x).blocks())
+    assert len(one) == 1 and one[0].data_ptr() == x.data_ptr() and torch.equal(FeatureBlocks.of_map(x).join(), x)
+    calls = []
+    fb = FeatureBlocks.of_map(x, lambda b: (calls.append(b.shape[0]), torch.cat([b, -b], 1))[1], rows=4)
+    assert calls == []                                    # nothing computed before it is read
+    assert torch.equal(fb.join(), torch.cat([x, -x], 2)) and calls == [4, 4, 2]
+    assert (fb.height, fb.width) == (2, 5)
+
+
 def test_save_load_round_trip(tmp_path):
     m = get_method("gaussiands")()
     m.field = _field(7)
