@@ -9,8 +9,9 @@ N randomly initialised Gaussians, 3 feature channels) and its first three views'
 plain tensors and arrays.
 --time: forward (`render()` under no_grad) and forward+backward (every parameter requiring grad, a
 fixed random linear loss on every output) ms of `render(backend="cpu")` on each saved camera, the
-best of --repeats per camera, averaged over the cameras. It uses only `GaussianField`, `Camera` and
-`render`, so older commits can be timed on the same inputs. render_cpu.py's random scene has
+best of --repeats per camera, averaged over the cameras; the step is render_cpu.py's (this folder's
+copy). It uses only `GaussianField`, `Camera` and `render`, so older commits can be timed on the
+same inputs. render_cpu.py's random scene has
 Gaussians a pixel or two wide; these are the sizes training starts from (docs/benchmarks.md says why
 the speed-up differs between the two).
 """
@@ -23,19 +24,24 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-import torch
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+# isort: off
+# render_cpu imports gsbench before torch (gsbench's OpenMP default, as in the other benchmarks);
+# its training-like step (every parameter requiring grad, a fixed random loss) is the one timed here
+import render_cpu  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
 
-from gsbench.camera import Camera  # isort: skip
-from gsbench.gaussians import GaussianField
-from gsbench.render import render
+from gsbench.camera import Camera  # noqa: E402
+from gsbench.gaussians import GaussianField  # noqa: E402
+from gsbench.render import render  # noqa: E402
+# isort: on
 
 CAMERAS = 3
 
 
 def make(out: Path, size: str) -> None:
     """Save train_speed's initial field at `size` (N@WxH) and its first cameras to `out`."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     import train_speed as TS
 
     from gsbench.datasets import load_scene
@@ -53,26 +59,22 @@ def make(out: Path, size: str) -> None:
     print(f"wrote {out}: {n} Gaussians, {len(cams)} cameras at {w}x{h}")
 
 
-def _step(tensors: dict, cam: Camera) -> None:
-    leaf = GaussianField(**{k: v.detach().clone().requires_grad_(True) for k, v in tensors.items()})
-    out = render(leaf, cam, backend="cpu")
-    g = torch.Generator().manual_seed(1)
-    loss = sum((t * torch.randn(t.shape, generator=g)).sum()
-               for t in (out.rgb, out.depth, out.alpha, out.features) if t is not None)
-    loss.backward()
+def _step(field: GaussianField, cam: Camera) -> None:
+    render_cpu._step(field, cam, "cpu")
 
 
-def _forward(tensors: dict, cam: Camera) -> None:
+def _forward(field: GaussianField, cam: Camera) -> None:
     with torch.no_grad():
-        render(GaussianField(**tensors), cam, backend="cpu")
+        render(field, cam, backend="cpu")
 
 
 def time_file(path: Path, repeats: int) -> dict:
     """{"fwd_ms", "fwdbwd_ms", "threads", "size"} of the saved field."""
     d = torch.load(path, weights_only=False)
+    field = GaussianField(**d["field"])
     cams = [Camera(np.asarray(K), np.asarray(w2c), int(w), int(h)) for K, w2c, w, h in d["cameras"]]
     for c in cams:                      # compile / load the kernels, warm the allocator
-        _step(d["field"], c)
+        _step(field, c)
     res = {"threads": torch.get_num_threads(), "size": d["size"]}
     for name, fn in (("fwd_ms", _forward), ("fwdbwd_ms", _step)):
         best = []
@@ -80,7 +82,7 @@ def time_file(path: Path, repeats: int) -> dict:
             ts = []
             for _ in range(repeats):
                 t0 = time.perf_counter()
-                fn(d["field"], c)
+                fn(field, c)
                 ts.append(time.perf_counter() - t0)
             best.append(min(ts))
         res[name] = 1e3 * sum(best) / len(best)

@@ -140,10 +140,12 @@ def _frame_outputs(method, scene, need: dict, config: dict, modes: tuple, text) 
             queries = list(masks)
             for m in modes:
                 groups = {}
-                if "3dovs" in protocols and text(list(scene.class_names), m) is not None:
-                    groups["3dovs"] = ovs3d.class_texts(text(list(scene.class_names), m))
-                if "lerf" in protocols and queries and text(queries, m) is not None:
-                    groups["lerf"] = lerf.lerf_texts(text(queries, m), text(list(lerf.CANONICAL_NEGATIVES), m))[0]
+                classes = text(list(scene.class_names), m) if "3dovs" in protocols else None
+                if classes is not None:
+                    groups["3dovs"] = ovs3d.class_texts(classes)
+                positives = text(queries, m) if "lerf" in protocols and queries else None
+                if positives is not None:
+                    groups["lerf"] = lerf.lerf_texts(positives, text(list(lerf.CANONICAL_NEGATIVES), m))[0]
                 cos = _cosines(blocks[m], groups) if blocks[m] is not None and groups else {}
                 if "3dovs" in protocols:
                     out[("3dovs", m, i)] = (ovs3d.ovs3d_labels(cos["3dovs"], cam.height, cam.width)

@@ -45,8 +45,7 @@ def test_min_over_negatives_before_the_sigmoid_is_the_min_of_the_sigmoids_bit_fo
     """lerf_relevancy takes the largest negative cosine before one sigmoid per (pixel, query); the
     protocol's form is one sigmoid per negative, then the minimum. Written out here in float64 from
     the same cosines, the two must agree exactly, ties and saturated pixels included."""
-    from gsbench.metrics import pixel_norms
-    from gsbench.metrics._common import pixel_text_cosines
+    from gsbench.metrics import pixel_norms, pixel_text_cosines
     rng = np.random.default_rng(7)
     f = rng.standard_normal((40, 50, 8)).astype(np.float32)
     f[0, :5] = 0.0                                                    # no feature: cosine 0 with all
