@@ -126,17 +126,18 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
     t_out = np.empty((height, width), dtype=np_dtype)
     t64 = np.empty((height, width), dtype=np.float64)
     last = np.empty((height, width), dtype=np.int32)
+    spans = np.empty(2 * int(tile_off[-1]), dtype=np.int8)
     _set_threads()
     with numba.parallel_chunksize(1):
         K.raster_forward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                         out, t_out, t64, last)
-    state = (gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order)
+                         out, t_out, t64, last, spans)
+    state = (gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order, spans)
     return out, t_out, state
 
 
 def _raster_backward(state, g_out_np, g_t_np) -> np.ndarray:
     """Gradient rows (M, G_CH + C) in the caller's row order (working dtype)."""
-    gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order = state
+    gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order, spans = state
     m, n_ch = ch_s.shape
     n_cols = K.G_CH + n_ch
     full = np.zeros((m, n_cols), dtype=gp.dtype)
@@ -157,7 +158,7 @@ def _raster_backward(state, g_out_np, g_t_np) -> np.ndarray:
     for t_lo, t_hi in waves:
         with numba.parallel_chunksize(1):
             K.raster_backward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                              t64, last, g_out_np, g_t_np, t_lo, t_hi, rows)
+                              t64, last, g_out_np, g_t_np, t_lo, t_hi, rows, spans)
         K.reduce_rows(tile_off, ranks, order, t_lo, t_hi, rows, full)
     return full
 

@@ -28,14 +28,16 @@ Numerical mirror of the `torch` reference (gsbench/render/torch_backend.py):
 
 How the work is laid out (the speed comes from SIMD over the pixels of a tile row):
 - per tile, Gaussians outer (front to back in the forward, back to front in the backward); per
-  Gaussian only the rows `_row_range` leaves, a rigorous bound on where the exponent can reach THR;
+  Gaussian only its rows in the tile: `_row_range`, a rigorous bound on where the exponent can
+  reach THR, narrowed from both ends to the rows where `_col_range` finds columns. The forward
+  stores each (tile, Gaussian) pair's rows in `spans`; the backward walks the same rows;
 - each row is walked over all ROW lanes in a loop without branches (the skip rules are masks),
   over unsigned indices, on per-pixel state held in flat per-tile arrays at fixed offsets: LLVM
   vectorises these loops. The channels are then composited, one loop per channel, over the
   Gaussian's rows;
 - the backward recovers the transmittance back to front (T_k = T_{k+1} / (1 - alpha_k), float64)
   from the stored final float64 transmittance and the index of the last contributing Gaussian. It
-  skips rows `_col_range` finds empty, computes every pixel's terms of one Gaussian in a lane pass,
+  computes every pixel's terms of one Gaussian in a lane pass (only what the next passes read),
   then its channel and geometry gradients in two passes (`_bwd_channels`, `_bwd_geometry`) that sum
   over the pixels in float64. Those two are compiled with reassociation so that the sums vectorise:
   their rounding depends on the compiled code's vector width, not on the thread count. Each
@@ -59,14 +61,15 @@ NCONST = 6
 ROW = 16                        # lanes per tile row: tile_size <= ROW (the backend checks)
 MAXPIX = ROW * ROW              # per-pixel state of a tile: pixel (row, col) at row * ROW + col
 UMAXPIX = np.uint64(MAXPIX)
-# backward per-pixel arrays, MAXPIX apart: `px` (X_*: transmittance, g_T * T_final, last + 1) and
-# `lb`, the current Gaussian's terms per pixel (L_*: alpha, 1 - alpha, weight, d alpha's channel
-# part, contributes, contributes inside the alpha clamp, opacity * G, G, dx, dy)
+# backward per-pixel arrays, MAXPIX apart: `px` (X_*: transmittance, g_T * T_final, last + 1), `pxw`
+# (the pixel centre's x and y, working dtype) and `lb`, the current Gaussian's terms per pixel (L_*:
+# alpha (0 where the pair does not contribute), 1 - alpha, weight, d alpha's channel part, G)
 X_TR, X_TG, X_LAST = 0, 1, 2
-L_AL, L_OM, L_W, L_DA, L_V, L_CL, L_RAW, L_G, L_DX, L_DY = range(10)
-NLANE = 10
 UX_TR, UX_TG, UX_LAST = (np.uint64(k * MAXPIX) for k in (X_TR, X_TG, X_LAST))
-UL_AL, UL_OM, UL_W, UL_DA, UL_V, UL_CL, UL_RAW, UL_G, UL_DX, UL_DY = (np.uint64(k * MAXPIX) for k in range(NLANE))
+UW_X, UW_Y = np.uint64(0), np.uint64(MAXPIX)
+L_AL, L_OM, L_W, L_DA, L_G = range(5)
+NLANE = 5
+UL_AL, UL_OM, UL_W, UL_DA, UL_G = (np.uint64(k * MAXPIX) for k in range(NLANE))
 
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
 
@@ -201,17 +204,40 @@ def _row_range(my, mx, a, b, c, thr, xa, ya, tw, th):
     return _span(my64 - 0.5 - ya, half, th)          # centre: the row where dy = 0
 
 
+@njit(inline="always", **_OPTS)
+def _tight_rows(r_lo, r_hi, my, mx, a, b, c, thr, xa, ya, tw, pyc):
+    """[r_lo, r_hi] narrowed from both ends to the first and last rows where `_col_range` gives columns.
+
+    `_row_range` bounds the Gaussian's rows over the whole tile width, so at a tile beside the
+    Gaussian most of its rows are empty. The region in the tile is convex, so the rows between are
+    rarely empty; an empty one is walked with every lane masked, which gives the same result as
+    skipping it.
+    """
+    while r_lo <= r_hi:
+        i_lo, i_hi = _col_range(pyc[ya + r_lo] - my, mx, a, b, c, thr, xa, tw)
+        if i_lo <= i_hi:
+            break
+        r_lo += 1
+    while r_hi > r_lo:
+        i_lo, i_hi = _col_range(pyc[ya + r_hi] - my, mx, a, b, c, thr, xa, tw)
+        if i_lo <= i_hi:
+            break
+        r_hi -= 1
+    return r_lo, r_hi
+
+
 @njit(parallel=True, **_OPTS)
 def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                   out, t_out, t64_out, last_out):
+                   out, t_out, t64_out, last_out, spans):
     """Fused forward: all channels of every pixel, one tile per task.
 
     Gaussians are visited front to back, each over the rows `_row_range` leaves: first the
     exponent, alpha, transmittance and weight of every lane of each row, then one loop per channel
     over those rows. A finished pixel keeps its transmittance negated (the sign is the "done"
     flag); a tile stops when all its pixels are done. Writes out (H,W,C) channel sums, t_out (H,W)
-    final transmittance (working dtype), t64_out (H,W) the same in float64 and last_out (H,W) =
-    1 + tile-list position of the last contributing Gaussian.
+    final transmittance (working dtype), t64_out (H,W) the same in float64, last_out (H,W) =
+    1 + tile-list position of the last contributing Gaussian and spans (2 x pairs, int8) the
+    first and last row of each pair it visited (first > last: none), for the backward.
     """
     height, width, n_ch = out.shape
     n_tiles = tile_off.size - 1
@@ -246,6 +272,9 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
             thr = gp[g, THR]
             jp1 = np.float64(j + 1)
             r_lo, r_hi = _row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
+            r_lo, r_hi = _tight_rows(r_lo, r_hi, my, mx, a, b, c, thr, xa, ya, tw, pyc)
+            spans[2 * (start + j)] = r_lo
+            spans[2 * (start + j) + 1] = r_hi
             if r_hi < r_lo:
                 continue
             c_lo = ROW                     # first and last row where the Gaussian contributes
@@ -311,12 +340,14 @@ def _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1):
     pixels vectorise: their float64 rounding depends on the vector width of the compiled code
     (fixed for a given machine and numba cache, whatever the thread count), not on pixel order.
     """
+    for p in range(p0, p1):
+        lb[UL_DA + p] = 0.0
     for k in range(n_ch):
         cv = np.float64(ch[g, k])
         kb = np.uint64(k * MAXPIX)
         sk = 0.0
         for p in range(p0, p1):
-            vv = lb[UL_V + p] != 0.0
+            vv = lb[UL_AL + p] != 0.0
             gc = gb[kb + p]
             sv = sb[kb + p]
             sk += lb[UL_W + p] * gc if vv else 0.0
@@ -326,7 +357,7 @@ def _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1):
 
 
 @njit(**_SUM_OPTS)
-def _bwd_geometry(lb, px, acc, a64, b64, c64, p0, p1):
+def _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1):
     """Geometry pass of one Gaussian over the pixels [p0, p1): d alpha, then the sums of the
     opacity, mean and conic gradients (lanes outside the clamp or not contributing add 0)."""
     s_op = 0.0
@@ -336,11 +367,13 @@ def _bwd_geometry(lb, px, acc, a64, b64, c64, p0, p1):
     s_cb = 0.0
     s_cc = 0.0
     for p in range(p0, p1):
-        cl = lb[UL_CL + p] != 0.0
+        G = _like(lb[UL_G + p], op)
+        raw = op * G
+        cl = (lb[UL_AL + p] != 0.0) & (raw <= amax)     # contributes, and inside the alpha clamp
         d_alpha = lb[UL_DA + p] * px[UX_TR + p] - px[UX_TG + p] / lb[UL_OM + p]
-        d_pow = d_alpha * lb[UL_RAW + p]
-        dx64 = lb[UL_DX + p]
-        dy64 = lb[UL_DY + p]
+        d_pow = d_alpha * np.float64(raw)
+        dx64 = np.float64(pxw[UW_X + p] - mx)
+        dy64 = np.float64(pxw[UW_Y + p] - my)
         s_op += d_alpha * lb[UL_G + p] if cl else 0.0
         s_mx += d_pow * (a64 * dx64 + b64 * dy64) if cl else 0.0
         s_my += d_pow * (b64 * dx64 + c64 * dy64) if cl else 0.0
@@ -357,7 +390,7 @@ def _bwd_geometry(lb, px, acc, a64, b64, c64, p0, p1):
 
 @njit(parallel=True, **_OPTS)
 def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                    t64_in, last_in, g_out, g_t, t_lo, t_hi, rows):
+                    t64_in, last_in, g_out, g_t, t_lo, t_hi, rows, spans):
     """Gradient rows of tiles [t_lo, t_hi): row tile_off[t] - tile_off[t_lo] + j is the gradient
     contribution of the tile's j-th Gaussian, summed in float64 over the tile's pixels and stored
     in the dtype of `rows`.
@@ -391,6 +424,11 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
         sb = np.zeros(n_ch * MAXPIX, np.float64)        # colour behind: channel k of pixel p at k * MAXPIX + p
         gb = np.zeros(n_ch * MAXPIX, np.float64)        # d loss / d channel, same layout
         acc = np.zeros(n_cols, np.float64)
+        pxw = np.zeros(2 * MAXPIX, gp.dtype)             # per pixel: its centre's x and y (working dtype)
+        for r in range(ROW):
+            for i in range(ROW):
+                pxw[r * ROW + i] = pxc[xa + i]
+                pxw[MAXPIX + r * ROW + i] = pyc[min(ya + r, height - 1)]
         j_top = 0
         for r in range(th):
             for i in range(tw):
@@ -425,27 +463,20 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
             jf = np.float64(j)
             for k in range(n_cols):
                 acc[k] = 0.0
-            r_lo, r_hi = _row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
+            r_lo = np.int64(spans[2 * (start + j)])
+            r_hi = np.int64(spans[2 * (start + j) + 1])
             u_lo = ROW                                  # first and last row with a contributing pixel
             u_hi = -1
             for row in range(r_lo, r_hi + 1):
                 dy = pyc[ya + row] - my
                 rb = np.uint64(row * ROW)
-                i_lo, i_hi = _col_range(dy, mx, a, b, c, thr, xa, tw)
-                if i_hi < i_lo:                         # no lane of the row contributes
-                    for i in range(np.uint64(0), np.uint64(ROW)):
-                        lb[UL_V + rb + i] = 0.0
-                        lb[UL_CL + rb + i] = 0.0
-                    continue
                 n_v = 0
-                dy64 = np.float64(dy)
                 for i in range(np.uint64(0), np.uint64(ROW)):
                     p = rb + i
                     dx = pxc[xau + i] - mx
                     power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
                     G = _like(_exp(np.float64(power)), power)
-                    raw = op * G
-                    alpha = min(raw, amax)
+                    alpha = min(op * G, amax)
                     v = ((power <= zero) & (power >= thr) & (alpha >= amin) & (i < twu)
                          & (jf < px[UX_LAST + p]))
                     al64 = np.float64(alpha)
@@ -453,16 +484,10 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
                     tr0 = px[UX_TR + p]
                     trn = tr0 / om                      # transmittance before Gaussian j
                     px[UX_TR + p] = trn if v else tr0
-                    lb[UL_AL + p] = al64 if v else 0.0
+                    lb[UL_AL + p] = al64 if v else 0.0  # alpha >= ALPHA_MIN > 0 where v: AL != 0 is v
                     lb[UL_OM + p] = om if v else 1.0
                     lb[UL_W + p] = al64 * trn if v else 0.0
-                    lb[UL_DA + p] = 0.0
-                    lb[UL_V + p] = 1.0 if v else 0.0
-                    lb[UL_CL + p] = 1.0 if (v & (raw <= amax)) else 0.0   # no gradient through the clamp
-                    lb[UL_RAW + p] = np.float64(raw)
                     lb[UL_G + p] = np.float64(G)
-                    lb[UL_DX + p] = np.float64(dx)
-                    lb[UL_DY + p] = dy64
                     n_v += v
                 if n_v > 0:
                     u_lo = min(u_lo, row)
@@ -471,7 +496,7 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
                 p0 = np.uint64(u_lo * ROW)
                 p1 = np.uint64((u_hi + 1) * ROW)
                 _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1)
-                _bwd_geometry(lb, px, acc, a64, b64, c64, p0, p1)
+                _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
             for k in range(n_cols):
                 rows[r0 + j, k] = acc[k]
 
