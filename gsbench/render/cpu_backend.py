@@ -82,7 +82,8 @@ def _consts(np_dtype) -> np.ndarray:
     return c
 
 
-def _set_threads() -> None:
+def set_numba_threads() -> None:
+    """numba's thread count for the next parallel kernel: torch's, within NUMBA_NUM_THREADS."""
     numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
 
 
@@ -127,7 +128,7 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
     t64 = np.empty((height, width), dtype=np.float64)
     last = np.empty((height, width), dtype=np.int32)
     spans = np.empty(2 * int(tile_off[-1]), dtype=np.int8)
-    _set_threads()
+    set_numba_threads()
     with numba.parallel_chunksize(1):
         K.raster_forward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
                          out, t_out, t64, last, spans)
@@ -143,7 +144,7 @@ def _raster_backward(state, g_out_np, g_t_np) -> np.ndarray:
     full = np.zeros((m, n_cols), dtype=gp.dtype)
     n_tiles = tile_off.size - 1
     budget = max(1, ROW_BUDGET_BYTES // (gp.itemsize * n_cols))
-    _set_threads()
+    set_numba_threads()
     waves = []                # consecutive tiles whose rows fit in the budget (at least one tile)
     t_lo = 0
     while t_lo < n_tiles:
@@ -253,7 +254,7 @@ class _Projection:
         ok = np.empty(n, np.bool_)
         params = np.empty((n, P.NPROJ), np.float64)
         self.radii = np.empty((n, 2), np.int64)
-        _set_threads()
+        set_numba_threads()
         P.project_forward(self.pc, uv.astype(np.float64), self.log_scales, self.quats, self.logits, self.cam,
                           self.width, self.height, self.np_dtype == np.float32, ok, params, self.radii)
         self.ids = np.flatnonzero(ok)
@@ -341,7 +342,7 @@ class _FusedRender(torch.autograd.Function):
                 gr[:, P.P_CA:P.P_CC + 1] = full[:, K.G_CA:K.G_CC + 1]
                 gr[:, P.P_OP] = full[:, K.G_OP]
                 gr[:, P.P_Z] = full[:, K.G_CH + 3]
-                _set_threads()
+                set_numba_threads()
                 with timed("projection_backward"):
                     P.project_backward(ids, proj.pc, proj.log_scales, proj.quats, proj.logits, proj.cam, gr,
                                        g_means, g_ls, g_q, g_lg)

@@ -28,8 +28,9 @@ Numerical mirror of the `torch` reference (gsbench/render/torch_backend.py):
 
 How the work is laid out (the speed comes from SIMD over the pixels of a tile row):
 - per tile, Gaussians outer (front to back in the forward, back to front in the backward); per
-  Gaussian only its rows in the tile: `_row_range`, a rigorous bound on where the exponent can
-  reach THR, narrowed from both ends to the rows where `_col_range` finds columns. The forward
+  Gaussian only its rows in the tile (gsbench/render/cpu_bounds.py): `row_range`, a rigorous bound
+  on where the exponent can reach THR, narrowed from both ends to the rows where `col_range` finds
+  columns (`tight_rows`). The forward
   stores each (tile, Gaussian) pair's rows in `spans`; the backward walks the same rows;
 - each row is walked over all ROW lanes in a loop without branches (the skip rules are masks),
   over unsigned indices, on per-pixel state held in flat per-tile arrays at fixed offsets: LLVM
@@ -50,6 +51,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange, types
 from numba.extending import intrinsic, overload
+
+from gsbench.render.cpu_bounds import row_range, tight_rows
 
 MX, MY, CA, CB, CC, OP, THR = 0, 1, 2, 3, 4, 5, 6
 NPARAM = 8                      # padded to 8 values per Gaussian
@@ -137,101 +140,12 @@ def _tile_box(t, tiles_x, tile_size, width, height):
     return xa, ya, tw, tw * th
 
 
-@njit(inline="always", **_OPTS)
-def _span(centre, half, n):
-    """Indices [lo, hi] of 0..n-1 within `half` of `centre` (lo > hi: none), clamped before the
-    float -> int conversion so that huge or infinite bounds stay in range."""
-    lo = min(max(centre - half, -1.0), n + 1.0)
-    hi = min(max(centre + half, -1.0), n + 1.0)
-    return max(0, int(np.ceil(lo))), min(n - 1, int(np.floor(hi)))
-
-
-@njit(inline="always", **_OPTS)
-def _col_range(dy, mx, a, b, c, thr, xa, tw):
-    """Columns [i_lo, i_hi] of a tile row where the computed exponent can reach `thr` (i_lo > i_hi: none).
-
-    Exact, not a heuristic: along a row the exponent is the parabola
-    -a/2 (dx + b dy / a)^2 - dy^2 (c - b^2 / a) / 2, and the value computed in the working dtype
-    differs from it by less than 1e-5 (|a| dx^2 + |c| dy^2 + 2 |b dx dy|) (30x the float32
-    rounding bound of the five operations), so every pixel outside the returned columns (widened
-    by one pixel for the rounding of dx) has a computed exponent < thr and would be skipped anyway.
-    """
-    a64 = np.float64(a)
-    b64 = np.float64(b)
-    c64 = np.float64(c)
-    dy64 = np.float64(dy)
-    mx64 = np.float64(mx)
-    if not (a64 > 0.0):
-        return 0, tw - 1
-    dxm = max(abs(xa + 0.5 - mx64), abs(xa + tw - 0.5 - mx64)) + 1.0
-    err = 1e-5 * (abs(a64) * dxm * dxm + abs(c64) * dy64 * dy64 + 2.0 * abs(b64) * dxm * abs(dy64))
-    peak = -0.5 * dy64 * dy64 * (c64 - b64 * b64 / a64)
-    slack = peak + err - np.float64(thr)
-    slack += 1e-9 * (abs(peak) + abs(np.float64(thr)))
-    if not (slack >= 0.0):
-        return 1, 0
-    half = np.sqrt(2.0 * slack / a64) + 1.0
-    return _span(mx64 - b64 * dy64 / a64 - 0.5 - xa, half, tw)   # centre: the column where dx + b dy / a = 0
-
-
-@njit(inline="always", **_OPTS)
-def _row_range(my, mx, a, b, c, thr, xa, ya, tw, th):
-    """Rows [r_lo, r_hi] of a tile where `_col_range` can return columns (r_lo > r_hi: none).
-
-    A bound on `_col_range`'s own test, taken once per (tile, Gaussian) instead of once per row:
-    over a row the largest exponent is -dy^2 (c - b^2 / a) / 2, and `_col_range`'s error allowance
-    is at most its value at the tile's farthest column and row, so every row outside
-    |dy| <= sqrt(2 (allowance - thr) / (c - b^2 / a)) (widened by one row for the rounding of dy)
-    gets no columns from `_col_range` anyway.
-    """
-    a64 = np.float64(a)
-    b64 = np.float64(b)
-    c64 = np.float64(c)
-    mx64 = np.float64(mx)
-    my64 = np.float64(my)
-    if not (a64 > 0.0):
-        return 0, th - 1
-    q = c64 - b64 * b64 / a64
-    if not (q > 0.0):
-        return 0, th - 1
-    dxm = max(abs(xa + 0.5 - mx64), abs(xa + tw - 0.5 - mx64)) + 1.0
-    dym = max(abs(ya + 0.5 - my64), abs(ya + th - 0.5 - my64)) + 1.0
-    err = 1e-5 * (abs(a64) * dxm * dxm + abs(c64) * dym * dym + 2.0 * abs(b64) * dxm * dym)
-    room = (err - np.float64(thr)) * 1.000001 + 1e-9 * abs(np.float64(thr)) + 1e-30
-    if not (room >= 0.0):
-        return 1, 0
-    half = np.sqrt(2.0 * room / q) * 1.000001 + 1.0
-    return _span(my64 - 0.5 - ya, half, th)          # centre: the row where dy = 0
-
-
-@njit(inline="always", **_OPTS)
-def _tight_rows(r_lo, r_hi, my, mx, a, b, c, thr, xa, ya, tw, pyc):
-    """[r_lo, r_hi] narrowed from both ends to the first and last rows where `_col_range` gives columns.
-
-    `_row_range` bounds the Gaussian's rows over the whole tile width, so at a tile beside the
-    Gaussian most of its rows are empty. The region in the tile is convex, so the rows between are
-    rarely empty; an empty one is walked with every lane masked, which gives the same result as
-    skipping it.
-    """
-    while r_lo <= r_hi:
-        i_lo, i_hi = _col_range(pyc[ya + r_lo] - my, mx, a, b, c, thr, xa, tw)
-        if i_lo <= i_hi:
-            break
-        r_lo += 1
-    while r_hi > r_lo:
-        i_lo, i_hi = _col_range(pyc[ya + r_hi] - my, mx, a, b, c, thr, xa, tw)
-        if i_lo <= i_hi:
-            break
-        r_hi -= 1
-    return r_lo, r_hi
-
-
 @njit(parallel=True, **_OPTS)
 def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
                    out, t_out, t64_out, last_out, spans):
     """Fused forward: all channels of every pixel, one tile per task.
 
-    Gaussians are visited front to back, each over the rows `_row_range` leaves: first the
+    Gaussians are visited front to back, each over its rows (`tight_rows`): first the
     exponent, alpha, transmittance and weight of every lane of each row, then one loop per channel
     over those rows. A finished pixel keeps its transmittance negated (the sign is the "done"
     flag); a tile stops when all its pixels are done. Writes out (H,W,C) channel sums, t_out (H,W)
@@ -271,8 +185,8 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
             op = gp[g, OP]
             thr = gp[g, THR]
             jp1 = np.float64(j + 1)
-            r_lo, r_hi = _row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
-            r_lo, r_hi = _tight_rows(r_lo, r_hi, my, mx, a, b, c, thr, xa, ya, tw, pyc)
+            r_lo, r_hi = row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
+            r_lo, r_hi = tight_rows(r_lo, r_hi, my, mx, a, b, c, thr, xa, ya, tw, pyc)
             spans[2 * (start + j)] = r_lo
             spans[2 * (start + j) + 1] = r_hi
             if r_hi < r_lo:
@@ -397,10 +311,9 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
 
     Gaussians are visited back to front; every pixel carries its transmittance (recovered as
     T_j = T_{j+1} / (1 - alpha_j) from the stored final value) and the colour behind it. Per
-    Gaussian, three branch-free passes over the pixels of its rows (vectorised like the forward):
-    the lane pass (alpha, transmittance, weight; rows `_col_range` finds empty are skipped and
-    marked), then `_bwd_channels` and `_bwd_geometry`. Pixels that do not contribute add exact
-    zeros.
+    Gaussian, three branch-free passes over the pixels of the rows the forward recorded in `spans`
+    (vectorised like the forward): the lane pass (alpha, transmittance, weight, G), then
+    `_bwd_channels` and `_bwd_geometry`. Pixels that do not contribute add exact zeros.
     """
     height, width, n_ch = g_out.shape
     one = consts[K_ONE]
