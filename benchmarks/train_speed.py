@@ -36,6 +36,7 @@ import torch
 
 from gsbench import rundir
 from gsbench.gaussians import GaussianField
+from gsbench.methods.adam import Adam
 from gsbench.render import render
 
 
@@ -71,7 +72,7 @@ def reference_its(n: int, w: int, h: int, device: torch.device, iters: int, root
     views, _ = load_views(scene, cfg, device=device)
     fld, _ = scene_init(scene, cfg, 3)
     params = {k: torch.nn.Parameter(v.to(device).clone()) for k, v in fld.tensors().items() if v is not None}
-    opt = torch.optim.Adam(params.values(), lr=1e-3, eps=1e-15)
+    opt = Adam(params.values(), lr=1e-3, eps=1e-15)
     ids = sorted(views.cameras)
     targets = {i: torch.cat([views.images[i], torch.zeros(h, w, 4, device=device)], -1) for i in ids}
     if device.type == "cuda":

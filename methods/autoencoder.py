@@ -13,6 +13,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from gsbench.methods.adam import Adam
+
 
 def _mlp(dims: Sequence[int]) -> nn.Sequential:
     layers: list[nn.Module] = []
@@ -78,7 +80,7 @@ def train_autoencoder(features: np.ndarray, latent_dim: int, hidden: Sequence[in
         torch.manual_seed(int(seed))
         ae = FeatureAutoencoder(x.shape[1], latent_dim, hidden)
     xt = _unit(torch.from_numpy(x))
-    opt = torch.optim.Adam(ae.parameters(), lr=lr)
+    opt = Adam(ae.parameters(), lr=lr)
     loss = torch.tensor(float("nan"))
     # a few hundred rows through a small MLP: one thread is ~10x faster than two contending ones
     threads = torch.get_num_threads()

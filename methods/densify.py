@@ -13,6 +13,7 @@ import torch
 from torch import nn
 
 from gsbench.gaussians import normalize_quats, quat_to_rotmat
+from gsbench.methods.adam import Adam
 
 
 def inverse_sigmoid(x: torch.Tensor) -> torch.Tensor:
@@ -33,7 +34,7 @@ class ParamSet:
             self.params[name] = p
             if train:
                 groups.append({"params": [p], "lr": float(lrs[name]), "name": name})
-        self.optimizer = torch.optim.Adam(groups, lr=0.0, eps=1e-15)
+        self.optimizer = Adam(groups, lr=0.0, eps=1e-15)
 
     @property
     def num(self) -> int:

@@ -35,6 +35,7 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import SH_C0
+from gsbench.methods.adam import Adam
 from gsbench.methods.base import Method, Phases, _check_mode, _unit, load_views, scene_init
 from gsbench.methods.common import fit_priors, uses
 from gsbench.methods.feature_blocks import FeatureBlocks
@@ -251,7 +252,7 @@ class GaussianGrouping(Method):
         gen = torch.Generator(device=dev).manual_seed(seed + 3)
         resumed = ckpt if (ckpt is not None and ckpt.get("phase") == "main") else None
         if semantic:
-            opt = torch.optim.Adam(self.classifier.parameters(), lr=float(g["classifier_lr"]))
+            opt = Adam(self.classifier.parameters(), lr=float(g["classifier_lr"]))
             extra = (resumed or {}).get("extra", {})
             if "classifier" in extra:
                 self.classifier.load_state_dict(extra["classifier"])

@@ -169,7 +169,8 @@ def _grad_rows(x_img, o_img, bl, per, i_mu, scale, out):
 class _SSIMMean(torch.autograd.Function):
     @staticmethod
     def forward(ctx, img1, img2, window, c1, c2):
-        a, b = img1.detach().numpy(), img2.detach().numpy()
+        # C order: one compiled layout (a strided view would compile a second, 'A', variant)
+        a, b = np.ascontiguousarray(img1.detach().numpy()), np.ascontiguousarray(img2.detach().numpy())
         h, w, n_c = a.shape
         set_numba_threads()
         st = np.empty((5 * n_c, h, w), a.dtype)

@@ -37,6 +37,7 @@ from gsbench.camera import Camera
 from gsbench.config import setting
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
+from gsbench.methods.adam import Adam
 from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
 from gsbench.phases import timed
 from gsbench.render import RenderOutput, render
@@ -155,7 +156,7 @@ class Trainer:
                  iterations: Optional[int] = None, trainable: Optional[set[str]] = None, densify: bool = True,
                  backend: str = "torch", seed: int = 0, extra_state: Optional[Callable[[], dict]] = None,
                  device: Optional[torch.device] = None,
-                 extra_optimizer: Optional[torch.optim.Optimizer] = None) -> None:
+                 extra_optimizer: Optional[Adam] = None) -> None:
         self.cfg = cfg
         self.tcfg = cfg["train"]
         self.views = views

@@ -3,6 +3,8 @@ session and shared read-only (a test that changes them works on a copy)."""
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -27,6 +29,21 @@ def _share_the_cores_between_xdist_workers() -> None:
 
 
 _share_the_cores_between_xdist_workers()
+
+
+def pytest_configure(config) -> None:
+    """In the xdist controller, before the workers start: compile the numba kernels into numba's
+    cache, float32 and float64 side by side (tests/support/numba_warmup.py), so the workers do not
+    each compile them at once on a fresh clone. GSBENCH_TEST_WARMUP=0 turns it off."""
+    if hasattr(config, "workerinput") or not config.getoption("numprocesses", None):
+        return
+    if os.environ.get("GSBENCH_TEST_WARMUP") == "0":
+        return
+    script = Path(__file__).parent / "support" / "numba_warmup.py"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "GSBENCH_THREADS": "1"}
+    procs = [subprocess.Popen([sys.executable, str(script), dtype], env=env) for dtype in ("float32", "float64")]
+    for p in procs:
+        p.wait()   # a failure here shows again, with its test, in the tests that render
 
 
 @pytest.fixture(scope="session")
