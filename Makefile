@@ -29,8 +29,11 @@ install: $(STAMP)
 demo: install
 	bash scripts/demo.sh $(VENV) $(DEMO)
 
+# Python's bytecode cache is on for the tests even where PYTHONDONTWRITEBYTECODE is set: without it
+# each xdist worker re-does pytest's assertion rewriting of every test module (collection 10 s
+# instead of 5) and every process a test starts recompiles gsbench.
 test: install
-	$(VENV)/bin/pytest -q -n auto --dist worksteal --durations=10 $(PYTEST_ARGS)
+	env -u PYTHONDONTWRITEBYTECODE $(VENV)/bin/pytest -q -n auto --dist worksteal --durations=10 $(PYTEST_ARGS)
 
 # ruff's rules and line length are set in pyproject.toml ([tool.ruff]).
 lint: install
