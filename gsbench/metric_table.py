@@ -26,6 +26,9 @@ REMOVAL_METRICS = ("removal_residual", "removal_psnr_outside")
 DEPTH_METRICS = ("depth_absrel",)
 ORDERING_METRICS = ("ordering_adjacent_distance", "ordering_adjacent_mask_iou", "ordering_adjacent_mask_iou_strict",
                     "ordering_adjacent_mask_iou_flow")
+# what the method was given to work with, read from its train summary: the share of pixels the L_ds edge
+# map marks (a study of L_ds says nothing when it is near 0; docs/methods.md)
+INPUT_METRICS = ("ds_edge_fraction",)
 TIMING_NAMES = ("train_s", "eval_s", "render_ms")
 MEMORY_NAMES = ("peak_rss_mb", "train_peak_rss_mb", "peak_cuda_mb", "train_peak_cuda_mb", "eval_peak_cuda_mb")
 
@@ -46,7 +49,7 @@ def _seg_names() -> tuple[str, ...]:
 
 #: every name `metrics` may hold, in report order
 METRIC_NAMES: tuple[str, ...] = (IMAGE_METRICS + _seg_names() + MASK_FOLDER_METRICS + REMOVAL_METRICS
-                                 + ORDERING_METRICS + DEPTH_METRICS)
+                                 + ORDERING_METRICS + DEPTH_METRICS + INPUT_METRICS)
 #: every quantity a collected row may carry (metrics, timings, memory)
 KNOWN_METRICS: frozenset[str] = frozenset(METRIC_NAMES + TIMING_NAMES + MEMORY_NAMES)
 
@@ -90,6 +93,7 @@ METRICS: dict[str, MetricSpec] = {
     "ordering_adjacent_mask_iou": _pct("Adjacent mask IoU (shared ids)"),
     "ordering_adjacent_mask_iou_strict": _pct("Adjacent mask IoU (strict)"),
     "ordering_adjacent_mask_iou_flow": _pct("Adjacent mask IoU (strict, flow)"),
+    "ds_edge_fraction": MetricSpec("L_ds edge pixels (%)", "$E_d$ pixels (\\%)", None, 100.0, 3),
     # timings / memory (rows of the long table with source "timings" / "memory")
     "train_s": MetricSpec("Training time (min)", "Training Time (min)", "lower", 1.0 / 60.0, 2),
     "eval_s": MetricSpec("Eval time (s)", "Eval Time (s)", "lower", 1.0, 1),
@@ -122,4 +126,4 @@ LOGICAL_SPEC = {
 
 __all__ = ["MetricSpec", "METRICS", "LOGICAL_SPEC", "METRIC_NAMES", "KNOWN_METRICS", "SEG_BASES", "FRAME_SETS",
            "FRAME_SET_SUFFIX", "IMAGE_METRICS", "MASK_FOLDER_METRICS", "REMOVAL_METRICS", "DEPTH_METRICS",
-           "ORDERING_METRICS", "TIMING_NAMES", "MEMORY_NAMES", "seg_metric"]
+           "ORDERING_METRICS", "INPUT_METRICS", "TIMING_NAMES", "MEMORY_NAMES", "seg_metric"]

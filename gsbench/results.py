@@ -24,8 +24,8 @@ from typing import Any, Iterable, Optional
 
 from gsbench.errors import InputError
 
-from gsbench.metric_table import (DEPTH_METRICS, IMAGE_METRICS, KNOWN_METRICS, ORDERING_METRICS,  # isort: skip
-                                  REMOVAL_METRICS, SEG_BASES, seg_metric)
+from gsbench.metric_table import (DEPTH_METRICS, IMAGE_METRICS, INPUT_METRICS, KNOWN_METRICS,  # isort: skip
+                                  ORDERING_METRICS, REMOVAL_METRICS, SEG_BASES, seg_metric)
 
 RESULTS_VERSION = 2
 STATUSES = ("done", "failed", "nonfinite")
@@ -71,7 +71,8 @@ def run_results(*, identity: dict, metrics: dict, metric_impl: dict, skipped: di
 
 
 def failed_results(*, identity: dict, reason: str, machine: dict, timings: Optional[dict] = None,
-                   metrics: Iterable[str] = IMAGE_METRICS + REMOVAL_METRICS + ORDERING_METRICS + DEPTH_METRICS
+                   metrics: Iterable[str] = (IMAGE_METRICS + REMOVAL_METRICS + ORDERING_METRICS + DEPTH_METRICS
+                                              + INPUT_METRICS)
                    ) -> dict:
     """results.json of a cell whose training or evaluation failed: the given metrics null, each with
     `reason` under its own name in skipped, status "failed"."""

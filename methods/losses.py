@@ -28,8 +28,9 @@ All image tensors are (H, W, C) or (H, W). Every division, sqrt and normalisatio
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Optional
+from typing import Any, Optional
 
 import cv2
 import numpy as np
@@ -345,6 +346,20 @@ def to_uint8_minmax(values: np.ndarray, valid: np.ndarray) -> Optional[np.ndarra
     out = np.zeros(v.shape, dtype=np.float64)
     out[m] = (v[m] - lo) / (hi - lo) * 255.0
     return np.clip(np.round(out), 0, 255).astype(np.uint8)
+
+
+#: E_d covering a smaller share of a view's pixels than this counts as empty: L_ds then acts on a few
+#: dozen pixels of a 256x192 view (fewer than one in a thousand), too few to move a boundary metric
+EDGE_FLOOR = 1e-3
+
+
+def edge_coverage(edges: Mapping[Any, np.ndarray], floor: float = EDGE_FLOOR) -> tuple[float, int]:
+    """(mean share of pixels E_d marks over the views, number of views whose share is below `floor`);
+    (0.0, 0) for no views."""
+    shares = [float(np.mean(np.asarray(e, dtype=bool))) if np.asarray(e).size else 0.0 for e in edges.values()]
+    if not shares:
+        return 0.0, 0
+    return float(np.mean(shares)), sum(sh < floor for sh in shares)
 
 
 def depth_edges(values: np.ndarray, valid: np.ndarray, low: float = 50, high: float = 150,

@@ -17,7 +17,9 @@ paper number are in the same display units (PSNR in dB, IoU in %, r as is):
   +-margin, opposite when it lies wholly beyond the margin on the harmful side, else inconclusive.
   The margin is gsbench's own, fixed here before any run, not a number of the paper;
 - not run: the study, or one of the two rows it compares, has no finished run with the metric;
-- not testable: the resolver dropped the setting the claim is about (e.g. no depth prior).
+- not testable: the resolver dropped the setting the claim is about (e.g. no depth prior);
+- blind: not reproduced or inconclusive while the claim's positive control is not marked, or while the
+  compared row lacked what the mechanism acts on (`Claim.inputs`, e.g. an empty L_ds edge map).
 """
 from __future__ import annotations
 
@@ -26,7 +28,7 @@ from typing import Any
 
 from gsbench.methods.gaussiands.paper import MAX, PAPER_CLAIMS, ROBUST_MARGIN_DB, Claim
 from gsbench.reports.ablations import _covered, run_dropped
-from gsbench.reports.controls import blind_claims
+from gsbench.reports.controls import blind_claims, starved
 from gsbench.reports.data import Results, same
 from gsbench.reports.spec import metric_spec
 from gsbench.reports.stats import Diff, compare, mde_r, pearson, pearson_interval
@@ -36,7 +38,7 @@ from gsbench.reports.table import Cell, Column, Row, Table
 
 REPRODUCED, OPPOSITE, INCONCLUSIVE, NOT_RUN, NOT_TESTABLE = (
     "reproduced", "opposite", "inconclusive", "not run", "not testable")
-SMALLER, NOT_REPRODUCED = "smaller than claimed", "not reproduced"
+SMALLER, NOT_REPRODUCED, BLIND = "smaller than claimed", "not reproduced", "blind"
 def verdict(direction: int, lo: float | None, hi: float | None, paper: float | None = None,
             margin: float = ROBUST_MARGIN_DB) -> str:
     """The verdict of one claim from the interval [lo, hi] of (row - reference), or of r; with the
@@ -141,6 +143,9 @@ def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> Measured:
     if why:
         return Measured(text + f"; setting dropped: {why}", NOT_TESTABLE, mde)
     v = verdict(claim.direction, d.lo, d.hi, paper=claim.paper)
+    why_blind = starved(res, a, claim.inputs)
+    if why_blind and v in (NOT_REPRODUCED, INCONCLUSIVE):   # as for controls: never hides an effect
+        return Measured(text, f"{BLIND}: {why_blind}", mde)
     return Measured(text, verdict_text(v, claim.direction, d.lo, d.hi, claim.paper, sp.decimals), mde)
 
 
@@ -179,7 +184,8 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
            "lies short of the paper's value; the largest compatible effect is printed), opposite (excludes zero on "
            "the other side), inconclusive (contains zero and the paper's value, or one seed); without a number "
            "only the side of zero counts; blind = not reproduced or inconclusive while the claim's positive control "
-           "ran and showed no marked effect (table claims_controls); robustness claims use a "
+           "ran and showed no marked effect (table claims_controls), or while the compared row lacked what the "
+           "mechanism acts on (for L_ds: an edge map E_d marking under 0.1 % of the pixels); robustness claims use a "
            f"+-{ROBUST_MARGIN_DB} dB margin chosen by gsbench; not run = no runs.")
     return [Table("paper_claims", "Paper claims", cap, ["Claim", "Paper source", "Scene"], cols, rows,
                   section="claims")]

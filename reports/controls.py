@@ -7,8 +7,10 @@ nothing about the paper's effect.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
+from gsbench.methods.losses import EDGE_FLOOR
 from gsbench.reports.data import Results, same
 
 from gsbench.reports.spec import (AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
@@ -30,6 +32,7 @@ class Control:
     axes: tuple[str, ...]          # the columns that tell the control's rows apart
     reference: dict                # axis -> value of the reference row
     guards: tuple[str, ...] = ()   # claim keys that are blind when this control is not marked
+    inputs: dict = field(default_factory=dict)   # metric -> floor: what a row must have been given
 
 
 _DEPTH_CLAIMS = ("depth_ss_raw_psnr", "depth_mm_raw_psnr", "depth_ss_mm_psnr", "depth_ss_raw_mbiou",
@@ -43,12 +46,25 @@ CONTROLS: list[Control] = [
             "psnr", -1, (AX_NOISE_TYPE, AX_NOISE_SEVERITY), {AX_NOISE_TYPE: None, AX_NOISE_SEVERITY: 0},
             ("noise_motion_blur", "noise_gaussian", "noise_poisson", "noise_salt_pepper")),
     Control("ds_mbiou", "capped Gaussians, edge-averaged L_ds raises mBIoU", "control_ds", "mbiou", +1,
-            (AX_LOSSES[2],), {AX_LOSSES[2]: False}, ("loss_ds_miou", "loss_ds_mbiou")),
+            (AX_LOSSES[2],), {AX_LOSSES[2]: False}, ("loss_ds_miou", "loss_ds_mbiou"),
+            {"ds_edge_fraction": EDGE_FLOOR}),
     Control("latent_miou", "14 classes: a larger latent d raises mIoU over d = 1", "control_latent", "miou", +1,
             (AX_LATENT,), {AX_LATENT: 1}, ("latent_16_3", "latent_32_16")),
     Control("sem_miou", "lambda_sem = 5 against 0: the semantic loss raises mIoU (0 collapses)", "control_sem",
             "miou", +1, (AX_LAMBDAS[2],), {AX_LAMBDAS[2]: 0.0}, ("lambda_sem_r",)),
 ]
+
+
+def starved(res: Results, rids: list[str], inputs: dict) -> str | None:
+    """Why the compared row could not show the mechanism: an input metric whose mean over its runs lies
+    below the claim's floor (runs without the metric say nothing either way)."""
+    for metric, floor in inputs.items():
+        vals = [v for v in (res.value(r, metric) for r in rids) if math.isfinite(v)]
+        if vals and sum(vals) / len(vals) < floor:
+            sp = metric_spec(metric)
+            return (f"{sp.label} {sp.scale * sum(vals) / len(vals):.{sp.decimals}f} in the compared row, below "
+                    f"{sp.scale * floor:.{sp.decimals}f}")
+    return None
 
 
 def control_rows(res: Results, c: Control) -> list[tuple[str, str, str, str]]:
@@ -88,7 +104,8 @@ def control_rows(res: Results, c: Control) -> list[tuple[str, str, str, str]]:
                 mark = OPPOSITE
             else:
                 mark = UNMARKED
-            out.append((scene, label, d.text(sp.decimals) + mde, mark))
+            why = starved(res, rows, c.inputs)
+            out.append((scene, label, d.text(sp.decimals) + mde + (f"; {why}" if why else ""), mark))
     return out
 
 

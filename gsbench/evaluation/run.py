@@ -42,6 +42,19 @@ def _ordering(run_dir: Path) -> Block:
     return out
 
 
+EDGE_IMPL = "ds-edges/canny-minmax8-dilated/share-of-pixels/v1"
+
+
+def _edges(run_dir: Path) -> Block:
+    """ds_edge_fraction: the mean share of pixels the L_ds edge map E_d marked in training (train summary)."""
+    out = Block()
+    info = rundir.read_optional(run_dir / rundir.TRAIN_SUMMARY).get("info") or {}
+    share = info.get("edge_fraction")
+    out.put("ds_edge_fraction", None if share is None else float(share), EDGE_IMPL,
+            "no L_ds edge map in the run's train summary (a method without L_ds, or L_ds off)")
+    return out
+
+
 def _unscored(scene, fs, protocols: list[str], sets: dict) -> dict:
     """Labelled frames that no frame set scores, with the reason (never dropped silently)."""
     out = {}
@@ -105,6 +118,7 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
         out.merge(removal(method, scene, fs.reconstruction, rec_cams, config))
         out.merge(depth_metrics(method, scene, fs.reconstruction, rec_cams))
     out.merge(_ordering(run_dir))
+    out.merge(_edges(run_dir))
     for p, why in pskip.items():
         out.skip([seg_metric(b, p) for b in SEG_BASES[p]], why)
     frames_skipped = _unscored(scene, fs, protocols, sets)

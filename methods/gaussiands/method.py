@@ -12,6 +12,7 @@ prior. Terms the resolved config switched off (gaussiands.losses.*) are neither 
 """
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Optional
 
@@ -21,13 +22,15 @@ import torch
 from gsbench.methods.base import Method, Phases, load_views, scene_init
 from gsbench.methods.common import fit_priors, make_trainer, uses
 
-from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, expected_depth, normalised_depth,  # isort: skip
-                                    reconstruction_loss, sem_loss, tv_loss)
+from gsbench.methods.losses import (EDGE_FLOOR, depth_edges, depth_loss, ds_loss, edge_coverage,  # isort: skip
+                                    expected_depth, normalised_depth, reconstruction_loss, sem_loss, tv_loss)
 from gsbench.config import setting
 from gsbench.methods.gaussiands.spec import budget
 from gsbench.methods.residency import data_on, place
 from gsbench.methods.semantic import semantic_targets
 from gsbench.methods.trainer import LossResult
+
+log = logging.getLogger(__name__)
 
 
 class GaussianDS(Method):
@@ -70,8 +73,14 @@ class GaussianDS(Method):
             for v in train_ids:
                 edges[v] = torch.as_tensor(depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"],
                                                        int(e["dilate"])))
-            self.info["edge_fraction"] = (float(np.mean([float(x.float().mean()) for x in edges.values()]))
-                                          if edges else 0.0)
+            share, n_empty = edge_coverage({v: x.numpy() for v, x in edges.items()})
+            self.info["edge_fraction"], self.info["edge_views_empty"] = share, n_empty
+            if n_empty:
+                # not an error (a smooth prior can have no edges), but never silent: L_ds then does nothing
+                log.warning("L_ds: the depth-edge map E_d (Canny %s/%s on the depth prior) covers %.3f %% of the "
+                            "pixels; %d of %d views are below %.1f %%, where L_ds acts on almost nothing "
+                            "(docs/methods.md, 'When E_d is empty')", e["canny_low"], e["canny_high"], 100 * share,
+                            n_empty, len(edges), 100 * EDGE_FLOOR)
             edges = place(edges, dev, data_on(config))
         # the depth prior on the device once (or on the host: train.data_on): values (float32), validity
         # (finite and valid), its kind

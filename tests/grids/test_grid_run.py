@@ -258,6 +258,12 @@ def test_ablate_submitit_local(own_tmp):
             assert m[name] == m[f"{name}_{res['query_mode']}"]
             assert 0.0 <= m[name] <= 1.0
         assert 0.0 <= m["removal_residual"] <= 1.0
+        # the L_ds edge map's coverage travels from the train summary to results.json (none with L_ds off)
+        info = read_json(d / "train_summary.json")["info"]
+        if res["grid"]["gaussiands.losses.ds"]:
+            assert m["ds_edge_fraction"] == info["edge_fraction"] and "ds_edge_fraction" in res["metric_impl"]
+        else:
+            assert m["ds_edge_fraction"] is None and "L_ds off" in res["skipped"]["ds_edge_fraction"]
         assert res["providers"]["depth"] and res["providers"]["masks"] and res["providers"]["features"]
         pids.add(read_json(d / grids.CELL_STATUS_FILE)["pid"])
     assert os.getpid() not in pids and (out / ".submitit").is_dir()

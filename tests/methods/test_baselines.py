@@ -122,3 +122,18 @@ def test_frustum_init_on_a_forward_facing_scene_without_points(tmp_path):
     near, far = sc.meta["near"], sc.meta["far"]
     assert (zs > 0).all()                                          # in front of every training camera
     assert ((zs >= near * (1 - 1e-6)) & (zs <= far * (1 + 1e-6))).any(0).all()   # within bounds of its camera
+
+
+def test_gaussiands_says_when_the_depth_edge_map_is_empty(scene, tmp_path, caplog):
+    """Canny thresholds above any 8-bit gradient (the Sobel sum peaks at 2040) leave E_d empty: training
+    says so (a warning, the count of empty views in the summary) instead of running L_ds on nothing in
+    silence."""
+    cfg = load_config("gaussiands", "cpu-small", TINY + ["train.iterations=2", "gaussiands.edges.canny_low=5000",
+                                                    "gaussiands.edges.canny_high=6000"])
+    with caplog.at_level("WARNING", logger="gsbench.methods.gaussiands.method"):
+        g = train_run(cfg, scene, tmp_path / "g", progress=False)
+    info = read_json(g / "train_summary.json")["info"]
+    n_train = 7                                      # 8 views, every 8th held out
+    assert info["edge_fraction"] == 0.0 and info["edge_views_empty"] == n_train
+    said = [r.getMessage() for r in caplog.records if "E_d" in r.getMessage()]
+    assert len(said) == 1 and "covers 0.000 %" in said[0] and f"{n_train} of {n_train} views" in said[0]

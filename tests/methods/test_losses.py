@@ -232,3 +232,16 @@ def test_depth_loss_does_not_read_coverage_as_depth():
     on_e = depth_loss("scale_shift", expected_depth(D, alpha), prior, valid, "disparity", min_valid=2)
     assert float(on_e.loss) == pytest.approx(0.0, abs=1e-6)
     assert float(on_d.loss) > 0.1
+
+
+def test_edge_coverage_hand_computed():
+    from gsbench.methods.losses import edge_coverage
+    a = np.zeros((10, 10), bool)
+    a[0, :3] = True                      # 3 % of the pixels
+    b = np.zeros((10, 10), bool)
+    b[5, 5] = True                       # 1 %
+    c = np.zeros((20, 50), bool)         # none
+    share, empty = edge_coverage({0: a, 1: b, 2: c}, floor=0.02)
+    assert share == pytest.approx(0.04 / 3) and empty == 2
+    assert edge_coverage({0: a, 1: b, 2: c}) == (pytest.approx(0.04 / 3), 1)
+    assert edge_coverage({}) == (0.0, 0)

@@ -323,3 +323,44 @@ def test_dose_band_hand_computed_and_figure(tmp_path: Path):
     dose = next(d for d in DOSES if d.study == "control_depth" and d.metric == "psnr")
     paths = plot_dose(res, dose, tmp_path / "dose")
     assert len(paths) == 1 and paths[0].stat().st_size > 1000
+
+
+def _ds_runs(root: Path, edge_share: float, effect: float = 0.0) -> Results:
+    """loss_subsets rows L_ds on / off on 3 seeds: mIoU differs by +1, -1, +1 points (+ effect); the
+    L_ds-on runs record `edge_share` as their E_d coverage."""
+    for s in (0, 1, 2):
+        for ds in (False, True):
+            metrics = {"miou_3dovs": 0.5 + ((0.01 * (-1) ** s + effect) if ds else 0.0), "psnr": 20.0}
+            if ds:
+                metrics["ds_edge_fraction"] = edge_share
+            write_run(root, f"ls/{int(ds)}_{s}", method="gaussiands", scene="bench", seed=s, study="loss_subsets",
+                      grid={"gaussiands.losses.depth": False, "gaussiands.losses.tv": False,
+                            "gaussiands.losses.ds": ds}, metrics=metrics)
+    return Results(collect(root))
+
+
+def test_an_empty_edge_map_makes_the_ds_claims_blind(tmp_path: Path):
+    """E_d under 0.1 % of the pixels in the L_ds-on row: no effect reads blind, with the share."""
+    full = full_rows(_ds_runs(tmp_path / "empty", 0.0004))
+    assert full["loss_ds_miou"][2] == "blind: L_ds edge pixels (%) 0.040 in the compared row, below 0.100"
+    # with edges the same interval is sized against the paper as usual
+    full = full_rows(_ds_runs(tmp_path / "edges", 0.02))
+    assert full["loss_ds_miou"][2].startswith(NOT_REPRODUCED + ": at most +")
+    # an effect that excludes zero is never hidden: +4, +2, +4 points
+    full = full_rows(_ds_runs(tmp_path / "effect", 0.0004, effect=0.03))
+    assert full["loss_ds_miou"][2].startswith(SMALLER + ": at most +")
+
+
+def test_the_ds_control_row_says_when_its_edge_map_is_empty(tmp_path: Path):
+    from gsbench.reports.controls import UNMARKED, controls_table
+    for s in (0, 1, 2):
+        for ds in (False, True):
+            metrics = {"mbiou_3dovs": 0.6 + (0.01 * (-1) ** s if ds else 0.0)}
+            if ds:
+                metrics["ds_edge_fraction"] = 0.0
+            write_run(tmp_path, f"cds/{int(ds)}_{s}", method="gaussiands", scene="bench", seed=s, study="control_ds",
+                      grid={"gaussiands.losses.ds": ds}, metrics=metrics)
+    t = controls_table(Results(collect(tmp_path)))[0]
+    row = [r for r in t.rows if r.labels[1].startswith("control_ds")][0]
+    assert row.cells[1].plain() == UNMARKED
+    assert row.cells[0].plain().endswith("; L_ds edge pixels (%) 0.000 in the compared row, below 0.100")
