@@ -356,7 +356,8 @@ EDGE_FLOOR = 1e-3
 def edge_coverage(edges: Mapping[Any, np.ndarray], floor: float = EDGE_FLOOR) -> tuple[float, int]:
     """(mean share of pixels E_d marks over the views, number of views whose share is below `floor`);
     (0.0, 0) for no views."""
-    shares = [float(np.mean(np.asarray(e, dtype=bool))) if np.asarray(e).size else 0.0 for e in edges.values()]
+    arrays = [np.asarray(e, dtype=bool) for e in edges.values()]
+    shares = [float(a.mean()) if a.size else 0.0 for a in arrays]
     if not shares:
         return 0.0, 0
     return float(np.mean(shares)), sum(sh < floor for sh in shares)

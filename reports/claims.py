@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from gsbench.methods.gaussiands.paper import MAX, PAPER_CLAIMS, ROBUST_MARGIN_DB, Claim
+from gsbench.methods.losses import EDGE_FLOOR
 from gsbench.reports.ablations import _covered, run_dropped
 from gsbench.reports.controls import blind_claims, starved
 from gsbench.reports.data import Results, same
@@ -185,7 +186,8 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
            "the other side), inconclusive (contains zero and the paper's value, or one seed); without a number "
            "only the side of zero counts; blind = not reproduced or inconclusive while the claim's positive control "
            "ran and showed no marked effect (table claims_controls), or while the compared row lacked what the "
-           "mechanism acts on (for L_ds: an edge map E_d marking under 0.1 % of the pixels); robustness claims use a "
+           f"mechanism acts on (for L_ds: an edge map E_d marking under {100 * EDGE_FLOOR:g} % of the pixels); "
+           "robustness claims use a "
            f"+-{ROBUST_MARGIN_DB} dB margin chosen by gsbench; not run = no runs.")
     return [Table("paper_claims", "Paper claims", cap, ["Claim", "Paper source", "Scene"], cols, rows,
                   section="claims")]

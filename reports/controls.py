@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from gsbench.methods.losses import EDGE_FLOOR
+from gsbench.methods.gaussiands.paper import DS_INPUTS
 from gsbench.reports.data import Results, same
 
 from gsbench.reports.spec import (AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
@@ -47,7 +47,7 @@ CONTROLS: list[Control] = [
             ("noise_motion_blur", "noise_gaussian", "noise_poisson", "noise_salt_pepper")),
     Control("ds_mbiou", "capped Gaussians, edge-averaged L_ds raises mBIoU", "control_ds", "mbiou", +1,
             (AX_LOSSES[2],), {AX_LOSSES[2]: False}, ("loss_ds_miou", "loss_ds_mbiou"),
-            {"ds_edge_fraction": EDGE_FLOOR}),
+            DS_INPUTS),
     Control("latent_miou", "14 classes: a larger latent d raises mIoU over d = 1", "control_latent", "miou", +1,
             (AX_LATENT,), {AX_LATENT: 1}, ("latent_16_3", "latent_32_16")),
     Control("sem_miou", "lambda_sem = 5 against 0: the semantic loss raises mIoU (0 collapses)", "control_sem",
@@ -60,9 +60,10 @@ def starved(res: Results, rids: list[str], inputs: dict) -> str | None:
     below the claim's floor (runs without the metric say nothing either way)."""
     for metric, floor in inputs.items():
         vals = [v for v in (res.value(r, metric) for r in rids) if math.isfinite(v)]
-        if vals and sum(vals) / len(vals) < floor:
+        mean = sum(vals) / len(vals) if vals else math.inf
+        if mean < floor:
             sp = metric_spec(metric)
-            return (f"{sp.label} {sp.scale * sum(vals) / len(vals):.{sp.decimals}f} in the compared row, below "
+            return (f"{sp.label} {sp.scale * mean:.{sp.decimals}f} in the compared row, below "
                     f"{sp.scale * floor:.{sp.decimals}f}")
     return None
 

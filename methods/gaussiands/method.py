@@ -70,18 +70,17 @@ class GaussianDS(Method):
             raise ValueError(f"gaussiands: depth terms are on but the priors gave no depth ({pri.skipped})")
         if g["losses"]["ds"] and depth is not None:
             e = g["edges"]
-            for v in train_ids:
-                edges[v] = torch.as_tensor(depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"],
-                                                       int(e["dilate"])))
-            share, n_empty = edge_coverage({v: x.numpy() for v, x in edges.items()})
+            edges_np = {v: depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"],
+                                       int(e["dilate"])) for v in train_ids}
+            share, n_empty = edge_coverage(edges_np)
             self.info["edge_fraction"], self.info["edge_views_empty"] = share, n_empty
             if n_empty:
                 # not an error (a smooth prior can have no edges), but never silent: L_ds then does nothing
                 log.warning("L_ds: the depth-edge map E_d (Canny %s/%s on the depth prior) covers %.3f %% of the "
                             "pixels; %d of %d views are below %.1f %%, where L_ds acts on almost nothing "
                             "(docs/methods.md, 'When E_d is empty')", e["canny_low"], e["canny_high"], 100 * share,
-                            n_empty, len(edges), 100 * EDGE_FLOOR)
-            edges = place(edges, dev, data_on(config))
+                            n_empty, len(edges_np), 100 * EDGE_FLOOR)
+            edges = place({v: torch.as_tensor(x) for v, x in edges_np.items()}, dev, data_on(config))
         # the depth prior on the device once (or on the host: train.data_on): values (float32), validity
         # (finite and valid), its kind
         dprior = {}

@@ -41,7 +41,8 @@ class Claim:
 _ALL = {AX_LOSSES[0]: True, AX_LOSSES[1]: True, AX_LOSSES[2]: True}
 _NONE = {AX_LOSSES[0]: False, AX_LOSSES[1]: False, AX_LOSSES[2]: False}
 _ABL = "Sec. Ablation Studies"
-_EDGES = {"ds_edge_fraction": EDGE_FLOOR}   # L_ds claims: E_d must mark something
+#: what an L_ds study must have been given (results.json metric -> floor): an edge map that marks something
+DS_INPUTS = {"ds_edge_fraction": EDGE_FLOOR}
 PAPER_CLAIMS: list[Claim] = [
     Claim("depth_ss_raw_psnr", "scale-shift beats raw L1 depth (PSNR)", f"{_ABL}, Table tab-depth-align (bench)",
           "depth_formulation", "psnr", +1, 24.81 - 21.31, "24.81 vs 21.31 dB",
@@ -63,14 +64,14 @@ PAPER_CLAIMS: list[Claim] = [
           {**_NONE, AX_LOSSES[0]: True}, _NONE),
     Claim("loss_ds_miou", "L_ds alone raises mIoU over no auxiliary loss", f"{_ABL}, Table tab-ablation (bench)",
           "loss_subsets", "miou", +1, 84.40 - 47.10, "84.40 vs 47.10 %",
-          {**_NONE, AX_LOSSES[2]: True}, _NONE, inputs=_EDGES),
+          {**_NONE, AX_LOSSES[2]: True}, _NONE, inputs=DS_INPUTS),
     Claim("loss_all_psnr", "all three losses raise PSNR over none", f"{_ABL}, Table tab-ablation (bench)",
           "loss_subsets", "psnr", +1, 24.81 - 16.02, "24.81 vs 16.02 dB", _ALL, _NONE),
     Claim("loss_all_miou", "all three losses raise mIoU over none", f"{_ABL}, Table tab-ablation (bench)",
           "loss_subsets", "miou", +1, 96.97 - 47.10, "96.97 vs 47.10 %", _ALL, _NONE),
     Claim("loss_ds_mbiou", "adding L_ds to L_depth + L_tv raises mBIoU (boundary leakage)",
           f"{_ABL} (loss decomposition) and Sec. Boundary-Aware Semantic Segmentation", "loss_subsets", "mbiou", +1,
-          None, "no number given", _ALL, {**_ALL, AX_LOSSES[2]: False}, inputs=_EDGES),
+          None, "no number given", _ALL, {**_ALL, AX_LOSSES[2]: False}, inputs=DS_INPUTS),
     Claim("ordering_pose_random", "pose-nearest ordering raises adjacent mask IoU over random",
           f"{_ABL}, Table tab-ordering (five 3D-OVS scenes)", "ordering", "ordering_adjacent_mask_iou_strict", +1,
           53.21 - 33.92, "53.21 vs 33.92 %", {AX_ORDERING: "pose"}, {AX_ORDERING: "random"}),
