@@ -1,6 +1,7 @@
 """Training losses of the shared trainer and of GaussianDS (paper Sec. III-IV, docs/methods.md).
 
 All image tensors are (H, W, C) or (H, W). Every division, sqrt and normalisation is guarded.
+On the CPU, expected depth, scale_shift depth_loss, tv, sem and ds run `losses_cpu` (numba).
 
 - `ssim`: differentiable SSIM (Gaussian window 11, sigma 1.5, zero padding as in 3DGS), mean over pixels/channels;
   on the CPU computed by `ssim_cpu` (numba, hand-written backward), elsewhere by `ssim_map`.
@@ -37,6 +38,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from gsbench.methods import losses_cpu as LC
 from gsbench.methods.ssim_cpu import ssim_mean_cpu
 
 DEPTH_FORMULATIONS = ("none", "raw_l1", "minmax", "scale_shift", "pearson")
@@ -45,6 +47,24 @@ ALPHA_EPS = 1e-3          # accumulated alpha below this is "not covered" (1 - T
 CONSTANT_REL_EPS = 1e-9   # prior whose std is below this fraction of its magnitude is "constant"
 SSIM_C1 = 0.01 ** 2
 SSIM_C2 = 0.03 ** 2
+#: False forces the PyTorch code below (the reference that tests compare `losses_cpu` with)
+CPU_KERNELS = True
+
+
+def _cpu_kernels(*ts: torch.Tensor) -> bool:
+    """Whether `losses_cpu` takes these: non-empty CPU tensors of one float dtype and one shape."""
+    t0 = ts[0]
+    if not CPU_KERNELS or t0.dtype not in (torch.float32, torch.float64) or t0.numel() == 0:
+        return False
+    for t in ts:
+        if t.device.type != "cpu" or t.dtype != t0.dtype or t.shape != t0.shape:
+            return False
+    return True
+
+
+def _cpu_masks(like: torch.Tensor, *masks: torch.Tensor) -> bool:
+    """Whether these are bool CPU masks of the (H, W) of an (H, W, d) map."""
+    return all(m.dtype == torch.bool and m.device.type == "cpu" and m.shape == like.shape[:-1] for m in masks)
 
 
 # ---------------------------------------------------------------------------- SSIM / reconstruction
@@ -217,6 +237,8 @@ def normalised_depth(depth: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
 def expected_depth(depth: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
     """D / alpha where alpha > ALPHA_EPS, 0 (unusable for the depth loss) elsewhere: the depth of the
     covered part of each pixel, invariant to the opacities when one surface covers it."""
+    if _cpu_kernels(depth, alpha):
+        return LC.expected_depth_cpu(depth, alpha, ALPHA_EPS)
     covered = alpha > ALPHA_EPS
     return torch.where(covered, depth / alpha.clamp_min(ALPHA_EPS), torch.zeros_like(depth))
 
@@ -236,10 +258,16 @@ def depth_loss(formulation: str, depth: torch.Tensor, prior: np.ndarray | torch.
     one, zero = torch.ones((), device=dev), torch.zeros((), device=dev)
     if formulation == "none":
         return DepthTerm(None, torch.zeros((), dtype=torch.bool, device=dev), one, zero)
-    r, usable = render_space_depth(depth, kind)
     p = prior if isinstance(prior, torch.Tensor) else torch.as_tensor(np.asarray(prior, dtype=np.float32))
     p = p.to(device=dev, dtype=depth.dtype)
     pv = prior_valid if isinstance(prior_valid, torch.Tensor) else torch.as_tensor(_np_bool(prior_valid))
+    if (formulation == "scale_shift" and kind in ("disparity", "depth", "metric") and _cpu_kernels(depth, p)
+            and pv.dtype == torch.bool and pv.device.type == "cpu" and pv.shape == depth.shape
+            and not p.requires_grad):
+        loss, ok, s, t, n = LC.scale_shift_loss_cpu(depth, p, pv, kind == "disparity", DEPTH_EPS, min_valid,
+                                                    CONSTANT_REL_EPS)
+        return DepthTerm(loss, ok, s, t, n, int(min_valid))
+    r, usable = render_space_depth(depth, kind)
     m = usable.detach() & pv.to(dev) & torch.isfinite(p)
     w = m.to(depth.dtype)
     n = w.sum()
@@ -304,6 +332,8 @@ def tv_loss(depth: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
     """Isotropic TV of a (H, W) map: mean over pixels of sqrt(dx^2 + dy^2 + eps) (forward differences)."""
     if depth.shape[0] < 2 or depth.shape[1] < 2:
         return depth.sum() * 0.0
+    if depth.dim() == 2 and _cpu_kernels(depth):
+        return LC.tv_cpu(depth, eps)
     dx = depth[:-1, 1:] - depth[:-1, :-1]
     dy = depth[1:, :-1] - depth[:-1, :-1]
     return torch.sqrt((dx * dx + dy * dy + eps).clamp_min(1e-30)).mean()   # eps = 0: no NaN gradient at 0
@@ -313,6 +343,8 @@ def tv_loss(depth: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
 def sem_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor) -> torch.Tensor:
     """mean |S_hat - S| over pixels with a target (and channels), as a masked sum (no host sync);
     0 when no pixel has one: the caller knows that per view up front and counts the skip."""
+    if s_hat.dim() >= 1 and _cpu_kernels(s_hat, target) and _cpu_masks(s_hat, has_target):
+        return LC.masked_abs_mean_cpu(s_hat, target, has_target)
     w = has_target.to(s_hat.dtype)[..., None]
     n = w.sum() * s_hat.shape[-1]
     return ((s_hat - target).abs() * w).sum() / n.clamp_min(1.0)
@@ -328,6 +360,8 @@ def ds_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor,
     the image the edges cover). E_d (H, W) in {0, 1}; 0 when no pixel counts."""
     if average not in DS_AVERAGES:
         raise ValueError(f"average must be one of {DS_AVERAGES}, got {average!r}")
+    if s_hat.dim() >= 1 and _cpu_kernels(s_hat, target) and _cpu_masks(s_hat, has_target, edges):
+        return LC.masked_abs_mean_cpu(s_hat, target, has_target, edges, average == "edges")
     w = has_target.to(s_hat.dtype)[..., None]
     we = edges.to(s_hat.dtype)[..., None] * w
     n = (we if average == "edges" else w).sum() * s_hat.shape[-1]

@@ -104,7 +104,7 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
         raise ValueError(f"render backend 'cpu': tile_size must be 1..{K.ROW}, got {tile_size}")
     np_dtype = ch.dtype.type
     m, n_ch = ch.shape
-    order = np.argsort(z, kind="stable")
+    order = cpu_binning.depth_order(z)
     md = md[order]
     op = op[order]
     gp = np.zeros((m, K.NPARAM), dtype=np_dtype)
@@ -127,7 +127,7 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
     t_out = np.empty((height, width), dtype=np_dtype)
     t64 = np.empty((height, width), dtype=np.float64)
     last = np.empty((height, width), dtype=np.int32)
-    spans = np.empty(2 * int(tile_off[-1]), dtype=np.int8)
+    spans = np.empty(4 * int(tile_off[-1]), dtype=np.int8)
     set_numba_threads()
     with numba.parallel_chunksize(1):
         K.raster_forward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,

@@ -80,6 +80,36 @@ def row_range(my, mx, a, b, c, thr, xa, ya, tw, th):
 
 
 @njit(inline="always", **_OPTS)
+def col_bound(my, mx, a, b, c, thr, xa, ya, tw, th):
+    """Columns [i_lo, i_hi] of a tile where `col_range` can return columns in some row (i_lo > i_hi:
+    none), from one square root per (tile, Gaussian): the half rows of a tile the Gaussian cannot reach.
+
+    `row_range` with the axes swapped. Over all rows, the columns `col_range` returns lie within
+    max over dy of (|b dy / a| + sqrt(2 slack(dy) / a)) + 1 of mx, and that maximum (Cauchy-Schwarz)
+    is sqrt(2 (allowance - thr) / (a - b^2 / c)), the allowance taken at the tile's farthest column
+    and row as in `row_range`.
+    """
+    a64 = np.float64(a)
+    b64 = np.float64(b)
+    c64 = np.float64(c)
+    mx64 = np.float64(mx)
+    my64 = np.float64(my)
+    if not (a64 > 0.0) or not (c64 > 0.0):
+        return 0, tw - 1
+    q = a64 - b64 * b64 / c64
+    if not (q > 0.0):
+        return 0, tw - 1
+    dxm = max(abs(xa + 0.5 - mx64), abs(xa + tw - 0.5 - mx64)) + 1.0
+    dym = max(abs(ya + 0.5 - my64), abs(ya + th - 0.5 - my64)) + 1.0
+    err = 1e-5 * (abs(a64) * dxm * dxm + abs(c64) * dym * dym + 2.0 * abs(b64) * dxm * dym)
+    room = (err - np.float64(thr)) * 1.000001 + 1e-9 * abs(np.float64(thr)) + 1e-30
+    if not (room >= 0.0):
+        return 1, 0
+    half = np.sqrt(2.0 * room / q) * 1.000001 + 1.0
+    return _span(mx64 - 0.5 - xa, half, tw)          # centre: the column where dx = 0
+
+
+@njit(inline="always", **_OPTS)
 def tight_rows(r_lo, r_hi, my, mx, a, b, c, thr, xa, ya, tw, pyc):
     """[r_lo, r_hi] narrowed from both ends to the first and last rows where `col_range` gives columns.
 

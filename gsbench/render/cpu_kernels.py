@@ -19,23 +19,29 @@ that dtype, exactly as PyTorch compares a float32 tensor with a Python scalar.
 Numerical mirror of the `torch` reference (gsbench/render/torch_backend.py):
 - power, alpha = min(opacity * G, ALPHA_MAX) and 1 - alpha in the working dtype, with the
   reference's operation order (no FMA contraction: fastmath is off). G = exp(power) comes from
-  `_exp` (float64, rounded to the working dtype: the correctly rounded float32 exp on every value
-  a test sampled), the same function in both passes, so the backward sees the forward's alphas;
+  `_expw`: in float32 a float32 polynomial within 1.01 ulp (`_exp32`; PyTorch's CPU expf is
+  within 1 ulp), in float64 a float64 one within a few ulp (`_exp`); the same function in both
+  passes, so the backward sees the forward's alphas;
 - transmittance is a float64 running product of (1 - alpha) rounded to the working dtype at each
   step, as torch.cumprod does on the CPU; a pixel stops before the Gaussian whose rounded
   transmittance would be <= T_MIN;
 - the weight of Gaussian k is alpha_k * T_k in the working dtype; channel sums are float64.
 
-How the work is laid out (the speed comes from SIMD over the pixels of a tile row):
+How the work is laid out (the speed comes from SIMD over the pixels of a tile):
+- a tile's per-pixel state is held in flat per-tile arrays at fixed offsets, its left and right
+  halves (HALF = 8 columns) one after the other, each row-major (`_pix`): 16 consecutive entries
+  are two consecutive half rows, a block (BLK lanes, the unit of work);
 - per tile, Gaussians outer (front to back in the forward, back to front in the backward); per
-  Gaussian only its rows in the tile (gsbench/render/cpu_bounds.py): `row_range`, a rigorous bound
-  on where the exponent can reach THR, narrowed from both ends to the rows where `col_range` finds
-  columns (`tight_rows`). The forward
-  stores each (tile, Gaussian) pair's rows in `spans`; the backward walks the same rows;
-- each row is walked over all ROW lanes in a loop without branches (the skip rules are masks),
-  over unsigned indices, on per-pixel state held in flat per-tile arrays at fixed offsets: LLVM
-  vectorises these loops. The channels are then composited, one loop per channel, over the
-  Gaussian's rows;
+  Gaussian only the halves and rows of the tile it can reach (gsbench/render/cpu_bounds.py,
+  `_half_rows`): `row_range` and `col_bound`, rigorous bounds on where the exponent can reach THR,
+  then per half the rows narrowed from both ends to those where `col_range` finds columns
+  (`tight_rows`). The forward stores each (tile, Gaussian) pair's rows per half in `spans`; the
+  backward walks the same ones. A Gaussian a few pixels wide then costs half the lanes a whole
+  tile row would;
+- each block is walked over all BLK lanes in a loop without branches (the skip rules are masks;
+  a pixel outside the image starts "done"), over unsigned indices, with each pixel's centre read
+  from a per-tile array: LLVM vectorises these loops. The channels are then composited, one loop
+  per channel, over the Gaussian's blocks;
 - the backward recovers the transmittance back to front (T_k = T_{k+1} / (1 - alpha_k), float64)
   from the stored final float64 transmittance and the index of the last contributing Gaussian. It
   computes every pixel's terms of one Gaussian in a lane pass (only what the next passes read),
@@ -49,10 +55,10 @@ How the work is laid out (the speed comes from SIMD over the pixels of a tile ro
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange, types
-from numba.extending import intrinsic, overload
+from numba import njit, prange
 
-from gsbench.render.cpu_bounds import row_range, tight_rows
+from gsbench.render.cpu_bounds import col_bound, row_range, tight_rows
+from gsbench.render.cpu_exp import _expw, _like
 
 MX, MY, CA, CB, CC, OP, THR = 0, 1, 2, 3, 4, 5, 6
 NPARAM = 8                      # padded to 8 values per Gaussian
@@ -61,8 +67,11 @@ G_MX, G_MY, G_CA, G_CB, G_CC, G_OP, G_CH = 0, 1, 2, 3, 4, 5, 6
 # consts layout
 K_ONE, K_MHALF, K_ZERO, K_AMAX, K_AMIN, K_TMIN = 0, 1, 2, 3, 4, 5
 NCONST = 6
-ROW = 16                        # lanes per tile row: tile_size <= ROW (the backend checks)
-MAXPIX = ROW * ROW              # per-pixel state of a tile: pixel (row, col) at row * ROW + col
+ROW = 16                        # pixels per tile row: tile_size <= ROW (the backend checks)
+HALF = 8                        # lanes per half row: the unit of work (one vector of float32 lanes)
+HPIX = ROW * HALF               # pixels of one half of a tile
+BLK = 2 * HALF                  # lanes of a block: two consecutive half rows (the unit of work)
+MAXPIX = ROW * ROW              # per-pixel state of a tile: pixel (row, col) at _pix(row, col)
 UMAXPIX = np.uint64(MAXPIX)
 # backward per-pixel arrays, MAXPIX apart: `px` (X_*: transmittance, g_T * T_final, last + 1), `pxw`
 # (the pixel centre's x and y, working dtype) and `lb`, the current Gaussian's terms per pixel (L_*:
@@ -77,57 +86,6 @@ UL_AL, UL_OM, UL_W, UL_DA, UL_G = (np.uint64(k * MAXPIX) for k in range(NLANE))
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
 
 
-@intrinsic
-def _i64_as_f64(typingctx, x):
-    """The float64 whose bits are the int64 x (vectorisable, unlike a view of an array)."""
-    sig = types.float64(types.int64)
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], context.get_value_type(types.float64))
-    return sig, codegen
-
-
-_LN2_HI = 6.93147180369123816490e-01      # ln 2 split so that n * _LN2_HI is exact for |n| < 2^20
-_LN2_LO = 1.90821492927058770002e-10
-_INV_LN2 = 1.44269504088896338700e+00
-
-
-@njit(inline="always", **_OPTS)
-def _exp(x):
-    """exp(x) for x <= 0 in float64, without a library call (so loops around it vectorise).
-
-    x is clamped to [-708, 0] (NaN -> -708): callers use it only where the exponent is <= 0 and
-    mask every other lane. exp(x) = 2^n exp(r), n = round(x / ln 2), |r| <= ln 2 / 2, exp(r) by its
-    degree-12 Taylor polynomial (truncation < 2e-16 relative): about 1 ulp in float64; rounded to
-    float32 it is the correctly rounded expf on all 5 million samples of a test.
-    """
-    x = x if x > -708.0 else -708.0
-    x = x if x < 0.0 else 0.0
-    n = np.floor(x * _INV_LN2 + 0.5)
-    r = (x - n * _LN2_HI) - n * _LN2_LO
-    # Estrin's scheme: the same polynomial in about a third of Horner's dependent-operation depth
-    r2 = r * r
-    r4 = r2 * r2
-    r8 = r4 * r4
-    q0 = (1.0 + r) + (0.5 + r * (1.0 / 6.0)) * r2
-    q1 = (1.0 / 24.0 + r * (1.0 / 120.0)) + (1.0 / 720.0 + r * (1.0 / 5040.0)) * r2
-    q2 = (1.0 / 40320.0 + r * (1.0 / 362880.0)) + (1.0 / 3628800.0 + r * (1.0 / 39916800.0)) * r2
-    p = (q0 + q1 * r4) + (q2 + (1.0 / 479001600.0) * r4) * r8
-    return p * _i64_as_f64((np.int64(n) + 1023) << 52)
-
-
-def _like(x, ref):
-    """x (float64) rounded to the dtype of `ref` (the working dtype)."""
-    return x
-
-
-@overload(_like, inline="always")
-def _like_impl(x, ref):
-    if ref == types.float32:
-        return lambda x, ref: np.float32(x)
-    return lambda x, ref: x
-
-
 @njit(inline="always", **_OPTS)
 def _tile_box(t, tiles_x, tile_size, width, height):
     """First pixel column and row, width and pixel count of tile t."""
@@ -140,18 +98,49 @@ def _tile_box(t, tiles_x, tile_size, width, height):
     return xa, ya, tw, tw * th
 
 
+@njit(inline="always", **_OPTS)
+def _pix(r, i):
+    """Index in a tile's per-pixel arrays of the pixel at row r, column i: the two halves of the
+    tile are stored one after the other, each row-major with HALF lanes per row."""
+    return (i // HALF) * HPIX + r * HALF + (i - (i // HALF) * HALF)
+
+
+@njit(inline="always", **_OPTS)
+def _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc):
+    """spans[s0:s0 + 4] = first and last row of the left and the right half of the tile that a
+    Gaussian can reach (first > last: none): `row_range` once, `col_bound` for the halves it can
+    reach at all, then `tight_rows` within each half."""
+    for k in range(2):
+        spans[s0 + 2 * k] = 1
+        spans[s0 + 2 * k + 1] = 0
+    r_lo, r_hi = row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
+    if r_hi < r_lo:
+        return
+    k_lo, k_hi = col_bound(my, mx, a, b, c, thr, xa, ya, tw, th)
+    for h in range(2):
+        x0 = h * HALF
+        twh = min(HALF, tw - x0)
+        if twh <= 0 or k_hi < x0 or k_lo > x0 + twh - 1:
+            continue
+        h_lo, h_hi = tight_rows(r_lo, r_hi, my, mx, a, b, c, thr, xa + x0, ya, twh, pyc)
+        if h_hi >= h_lo:
+            spans[s0 + 2 * h] = h_lo
+            spans[s0 + 2 * h + 1] = h_hi
+
+
 @njit(parallel=True, **_OPTS)
 def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
                    out, t_out, t64_out, last_out, spans):
     """Fused forward: all channels of every pixel, one tile per task.
 
-    Gaussians are visited front to back, each over its rows (`tight_rows`): first the
-    exponent, alpha, transmittance and weight of every lane of each row, then one loop per channel
-    over those rows. A finished pixel keeps its transmittance negated (the sign is the "done"
-    flag); a tile stops when all its pixels are done. Writes out (H,W,C) channel sums, t_out (H,W)
-    final transmittance (working dtype), t64_out (H,W) the same in float64, last_out (H,W) =
-    1 + tile-list position of the last contributing Gaussian and spans (2 x pairs, int8) the
-    first and last row of each pair it visited (first > last: none), for the backward.
+    Gaussians are visited front to back, each over the half rows it can reach (`_half_rows`):
+    first the exponent, alpha, transmittance and weight of every lane of each half row, then one
+    loop per channel over those half rows. A finished pixel keeps its transmittance negated (the
+    sign is the "done" flag); a tile stops when all its pixels are done. Writes out (H,W,C)
+    channel sums, t_out (H,W) final transmittance (working dtype), t64_out (H,W) the same in
+    float64, last_out (H,W) = 1 + tile-list position of the last contributing Gaussian and spans
+    (4 x pairs, int8) the first and last row of each half of each pair it visited (first > last:
+    none), for the backward.
     """
     height, width, n_ch = out.shape
     n_tiles = tile_off.size - 1
@@ -166,15 +155,18 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
         st = np.empty(2 * MAXPIX, np.float64)      # [0, MAXPIX): transmittance (<0: done); then last + 1
         wb = np.zeros(MAXPIX, gp.dtype)            # weight of the current Gaussian (0: no contribution)
         acc = np.zeros(n_ch * MAXPIX, np.float64)  # channel k of pixel p at k * MAXPIX + p
-        for p in range(MAXPIX):
-            st[p] = 1.0
-            st[MAXPIX + p] = 0.0
+        th = n_pix // tw
+        pxw = np.empty(2 * MAXPIX, gp.dtype)       # per pixel: its centre's x and y (working dtype)
+        for r in range(ROW):
+            for i in range(ROW):
+                p = _pix(r, i)
+                pxw[p] = pxc[xa + i]
+                pxw[MAXPIX + p] = pyc[min(ya + r, height - 1)]
+                st[p] = 1.0 if (r < th) & (i < tw) else -1.0   # a pixel outside the image is done
+                st[MAXPIX + p] = 0.0
         n_live = n_pix
         start = tile_off[t]
         n = tile_off[t + 1] - start
-        th = n_pix // tw
-        xau = np.uint64(xa)
-        twu = np.uint64(tw)
         for j in range(n):
             g = ranks[start + j]
             mx = gp[g, MX]
@@ -185,53 +177,55 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
             op = gp[g, OP]
             thr = gp[g, THR]
             jp1 = np.float64(j + 1)
-            r_lo, r_hi = row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
-            r_lo, r_hi = tight_rows(r_lo, r_hi, my, mx, a, b, c, thr, xa, ya, tw, pyc)
-            spans[2 * (start + j)] = r_lo
-            spans[2 * (start + j) + 1] = r_hi
-            if r_hi < r_lo:
-                continue
-            c_lo = ROW                     # first and last row where the Gaussian contributes
-            c_hi = -1
-            for row in range(r_lo, r_hi + 1):
-                # all ROW lanes of the row, branch-free (masks instead of `continue`), over unsigned
-                # indices (numba then emits no negative-index wraparound): LLVM vectorises it
-                dy = pyc[ya + row] - my
-                rb = np.uint64(row * ROW)
-                n_stop = 0
-                n_con = 0
-                for i in range(np.uint64(0), np.uint64(ROW)):
-                    p = rb + i
-                    dx = pxc[xau + i] - mx
-                    power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
-                    alpha = min(op * _like(_exp(np.float64(power)), power), amax)
-                    tp = st[p]
-                    ok = (power <= zero) & (power >= thr) & (alpha >= amin) & (tp > 0.0) & (i < twu)
-                    tn = tp * (one - alpha)
-                    con = ok & (_like(tn, power) > tmin)
-                    wb[p] = alpha * _like(tp, power) if con else zero
-                    st[p] = tn if con else (-tp if ok else tp)
-                    st[UMAXPIX + p] = jp1 if con else st[UMAXPIX + p]
-                    n_stop += ok != con
-                    n_con += con
-                n_live -= n_stop
-                if n_con > 0:
-                    c_lo = min(c_lo, row)
-                    c_hi = row
-            p0 = np.uint64(c_lo * ROW)
-            p1 = np.uint64((c_hi + 1) * ROW)
-            for k in range(n_ch if c_hi >= c_lo else 0):
-                cv = ch[g, k]
-                ab = np.uint64(k * MAXPIX)
-                for p in range(p0, p1):
-                    w = wb[p]
-                    v = w * cv
-                    acc[ab + p] += v if w != zero else 0.0
+            s0 = 4 * (start + j)
+            _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc)
+            for h in range(2):
+                r_lo = np.int64(spans[s0 + 2 * h])
+                r_hi = np.int64(spans[s0 + 2 * h + 1])
+                if r_hi < r_lo:
+                    continue
+                hb = np.uint64(h * HPIX)
+                c_lo = ROW                     # first and last block where the Gaussian contributes
+                c_hi = -1
+                for blk in range(r_lo // 2, r_hi // 2 + 1):
+                    # the BLK lanes of a block (two half rows), branch-free (masks instead of `continue`),
+                    # over unsigned indices (numba then emits no negative-index wraparound): LLVM vectorises it
+                    rb = hb + np.uint64(blk * BLK)
+                    n_stop = 0
+                    n_con = 0
+                    for i in range(np.uint64(0), np.uint64(BLK)):
+                        p = rb + i
+                        dx = pxw[p] - mx
+                        dy = pxw[UMAXPIX + p] - my
+                        power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
+                        alpha = min(op * _expw(power), amax)
+                        tp = st[p]
+                        ok = (power <= zero) & (power >= thr) & (alpha >= amin) & (tp > 0.0)
+                        tn = tp * (one - alpha)
+                        con = ok & (_like(tn, power) > tmin)
+                        wb[p] = alpha * _like(tp, power) if con else zero
+                        st[p] = tn if con else (-tp if ok else tp)
+                        st[UMAXPIX + p] = jp1 if con else st[UMAXPIX + p]
+                        n_stop += ok != con
+                        n_con += con
+                    n_live -= n_stop
+                    if n_con > 0:
+                        c_lo = min(c_lo, blk)
+                        c_hi = blk
+                p0 = hb + np.uint64(c_lo * BLK)
+                p1 = hb + np.uint64((c_hi + 1) * BLK)
+                for k in range(n_ch if c_hi >= c_lo else 0):
+                    cv = ch[g, k]
+                    ab = np.uint64(k * MAXPIX)
+                    for p in range(p0, p1):
+                        w = wb[p]
+                        v = w * cv
+                        acc[ab + p] += v if w != zero else 0.0
             if n_live == 0:
                 break
         for r in range(th):
             for i in range(tw):
-                p = r * ROW + i
+                p = _pix(r, i)
                 py = ya + r
                 px = xa + i
                 for k in range(n_ch):
@@ -267,7 +261,7 @@ def _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1):
             sk += lb[UL_W + p] * gc if vv else 0.0
             lb[UL_DA + p] += gc * (cv - sv) if vv else 0.0
             sb[kb + p] = lb[UL_AL + p] * cv + lb[UL_OM + p] * sv if vv else sv
-        acc[G_CH + k] = sk
+        acc[G_CH + k] += sk
 
 
 @njit(**_SUM_OPTS)
@@ -294,12 +288,12 @@ def _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1):
         s_ca += d_pow * (-0.5 * dx64 * dx64) if cl else 0.0
         s_cb += d_pow * (-dx64 * dy64) if cl else 0.0
         s_cc += d_pow * (-0.5 * dy64 * dy64) if cl else 0.0
-    acc[G_OP] = s_op
-    acc[G_MX] = s_mx
-    acc[G_MY] = s_my
-    acc[G_CA] = s_ca
-    acc[G_CB] = s_cb
-    acc[G_CC] = s_cc
+    acc[G_OP] += s_op
+    acc[G_MX] += s_mx
+    acc[G_MY] += s_my
+    acc[G_CA] += s_ca
+    acc[G_CB] += s_cb
+    acc[G_CC] += s_cc
 
 
 @njit(parallel=True, **_OPTS)
@@ -340,12 +334,13 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
         pxw = np.zeros(2 * MAXPIX, gp.dtype)             # per pixel: its centre's x and y (working dtype)
         for r in range(ROW):
             for i in range(ROW):
-                pxw[r * ROW + i] = pxc[xa + i]
-                pxw[MAXPIX + r * ROW + i] = pyc[min(ya + r, height - 1)]
+                p = _pix(r, i)
+                pxw[p] = pxc[xa + i]
+                pxw[MAXPIX + p] = pyc[min(ya + r, height - 1)]
         j_top = 0
         for r in range(th):
             for i in range(tw):
-                p = r * ROW + i
+                p = _pix(r, i)
                 py = ya + r
                 pxx = xa + i
                 tf = t64_in[py, pxx]
@@ -359,8 +354,6 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
         for j in range(j_top, n):
             for k in range(n_cols):
                 rows[r0 + j, k] = 0.0
-        xau = np.uint64(xa)
-        twu = np.uint64(tw)
         for j in range(j_top - 1, -1, -1):
             g = ranks[start + j]
             mx = gp[g, MX]
@@ -376,40 +369,44 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
             jf = np.float64(j)
             for k in range(n_cols):
                 acc[k] = 0.0
-            r_lo = np.int64(spans[2 * (start + j)])
-            r_hi = np.int64(spans[2 * (start + j) + 1])
-            u_lo = ROW                                  # first and last row with a contributing pixel
-            u_hi = -1
-            for row in range(r_lo, r_hi + 1):
-                dy = pyc[ya + row] - my
-                rb = np.uint64(row * ROW)
-                n_v = 0
-                for i in range(np.uint64(0), np.uint64(ROW)):
-                    p = rb + i
-                    dx = pxc[xau + i] - mx
-                    power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
-                    G = _like(_exp(np.float64(power)), power)
-                    alpha = min(op * G, amax)
-                    v = ((power <= zero) & (power >= thr) & (alpha >= amin) & (i < twu)
-                         & (jf < px[UX_LAST + p]))
-                    al64 = np.float64(alpha)
-                    om = np.float64(one - alpha)
-                    tr0 = px[UX_TR + p]
-                    trn = tr0 / om                      # transmittance before Gaussian j
-                    px[UX_TR + p] = trn if v else tr0
-                    lb[UL_AL + p] = al64 if v else 0.0  # alpha >= ALPHA_MIN > 0 where v: AL != 0 is v
-                    lb[UL_OM + p] = om if v else 1.0
-                    lb[UL_W + p] = al64 * trn if v else 0.0
-                    lb[UL_G + p] = np.float64(G)
-                    n_v += v
-                if n_v > 0:
-                    u_lo = min(u_lo, row)
-                    u_hi = row
-            if u_hi >= u_lo:
-                p0 = np.uint64(u_lo * ROW)
-                p1 = np.uint64((u_hi + 1) * ROW)
-                _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1)
-                _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
+            s0 = 4 * (start + j)
+            for h in range(2):
+                r_lo = np.int64(spans[s0 + 2 * h])
+                r_hi = np.int64(spans[s0 + 2 * h + 1])
+                if r_hi < r_lo:
+                    continue
+                hb = np.uint64(h * HPIX)
+                u_lo = ROW                                  # first and last block with a contributing pixel
+                u_hi = -1
+                for blk in range(r_lo // 2, r_hi // 2 + 1):
+                    rb = hb + np.uint64(blk * BLK)
+                    n_v = 0
+                    for i in range(np.uint64(0), np.uint64(BLK)):
+                        p = rb + i
+                        dx = pxw[UW_X + p] - mx
+                        dy = pxw[UW_Y + p] - my
+                        power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
+                        G = _expw(power)
+                        alpha = min(op * G, amax)
+                        v = ((power <= zero) & (power >= thr) & (alpha >= amin) & (jf < px[UX_LAST + p]))
+                        al64 = np.float64(alpha)
+                        om = np.float64(one - alpha)
+                        tr0 = px[UX_TR + p]
+                        trn = tr0 / om                      # transmittance before Gaussian j
+                        px[UX_TR + p] = trn if v else tr0
+                        lb[UL_AL + p] = al64 if v else 0.0  # alpha >= ALPHA_MIN > 0 where v: AL != 0 is v
+                        lb[UL_OM + p] = om if v else 1.0
+                        lb[UL_W + p] = al64 * trn if v else 0.0
+                        lb[UL_G + p] = np.float64(G)
+                        n_v += v
+                    if n_v > 0:
+                        u_lo = min(u_lo, blk)
+                        u_hi = blk
+                if u_hi >= u_lo:
+                    p0 = hb + np.uint64(u_lo * BLK)
+                    p1 = hb + np.uint64((u_hi + 1) * BLK)
+                    _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1)
+                    _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
             for k in range(n_cols):
                 rows[r0 + j, k] = acc[k]
 
