@@ -45,7 +45,7 @@ def test_bounds_hold_every_pixel_that_reaches_thr(dtype, tw, th):
     pyc = np.arange(ya + 16, dtype=dtype) + dtype(0.5)
     spans = np.empty(4, np.int8)
     reached = 0
-    for g in _gaussians(rng, 3000, dtype):
+    for g in _gaussians(rng, 1200, dtype):
         my, mx, a, b, c, thr = g
         dx = pxc[xa:xa + tw][None, :] - mx
         dy = pyc[ya:ya + th][:, None] - my
@@ -60,4 +60,4 @@ def test_bounds_hold_every_pixel_that_reaches_thr(dtype, tw, th):
             in_half = (cols >= h * HALF) & (cols < (h + 1) * HALF)
             assert np.all((rows[in_half] >= spans[2 * h]) & (rows[in_half] <= spans[2 * h + 1])), \
                 f"half {h}'s rows miss a pixel"
-    assert reached > 300           # the sample reaches the tile often enough to mean something
+    assert reached > 120           # the sample reaches the tile often enough to mean something
