@@ -105,7 +105,7 @@ def _pix(r, i):
     return (i // HALF) * HPIX + r * HALF + (i - (i // HALF) * HALF)
 
 
-@njit(inline="always", **_OPTS)
+@njit(**_OPTS)      # not inlined: once per (tile, Gaussian); inlined, it cost 3 s more compilation per dtype
 def _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc):
     """spans[s0:s0 + 4] = first and last row of the left and the right half of the tile that a
     Gaussian can reach (first > last: none): `row_range` once, `col_bound` for the halves it can
