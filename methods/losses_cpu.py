@@ -21,7 +21,7 @@ import torch
 from numba import njit
 
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
-_NONE = np.zeros(0, dtype=np.bool_)      # "no mask": every pixel counts
+_NONE = np.zeros(0, dtype=np.bool_)      # no edge mask: every pixel with a target counts
 TV_FLOOR = 1e-30                          # tv_loss's clamp_min of the squared gradient norm
 BLOCK = 1024                              # pixels per block of the blocked passes (a multiple of 8)
 
@@ -62,10 +62,8 @@ def _sign8(d):
 
 @njit(inline="always", **_OPTS)
 def _weights(has, edges, p0, p1, wp, wi):
-    """wp[j] and wi[j] = has & edges (edges only if size > 0) of pixel p0 + j as 0/1 in float64 and int8
-    (has of size 0: left as they are); returns the number of pixels with has and with has & edges."""
-    if has.size == 0:
-        return p1 - p0, p1 - p0
+    """wp[j] and wi[j] = has & edges (edges only if size > 0) of pixel p0 + j as 0/1 in float64 and int8;
+    returns the number of pixels with has and with has & edges."""
     n_h = 0
     n_b = 0
     hv = has[p0:p1]
@@ -97,7 +95,7 @@ def _abs1(av, bv, o, wi, sg):
 @njit(**_OPTS)
 def _abs_diff_fwd(a, b, c, has, edges, sg):
     """(sum of |a - b| w, pixels with has, pixels with has & edges) of flat a, b of P pixels x c values,
-    w of a pixel = has & edges as a 0/1 factor (has of size 0: w = 1); sg = w sign(a - b) (int8).
+    w of a pixel = has & edges as a 0/1 factor; sg = w sign(a - b) (int8).
     The factor multiplies as in PyTorch: a NaN where w = 0 still shows. c = 1 and 3 (the default
     latent size) are written out: a loop over a variable c does not vectorise (other c: 2-4x slower
     per value)."""
@@ -105,8 +103,8 @@ def _abs_diff_fwd(a, b, c, has, edges, sg):
     n_pix = a.size // c
     buf = np.empty(BLOCK)
     vals = np.empty(BLOCK * c if c != 1 and c != 3 else 0)
-    wp = np.ones(BLOCK)
-    wi = np.ones(BLOCK, np.int8)
+    wp = np.empty(BLOCK)
+    wi = np.empty(BLOCK, np.int8)
     n_h = 0
     n_b = 0
     for p0 in range(0, n_pix, BLOCK):

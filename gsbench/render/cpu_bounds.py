@@ -50,6 +50,38 @@ def col_range(dy, mx, a, b, c, thr, xa, tw):
 
 
 @njit(inline="always", **_OPTS)
+def _allowance(my, mx, a, b, c, xa, ya, tw, th):
+    """`col_range`'s error allowance at the tile's farthest column and row (float64): its largest value
+    over the tile."""
+    a64 = np.float64(a)
+    b64 = np.float64(b)
+    c64 = np.float64(c)
+    dxm = max(abs(xa + 0.5 - np.float64(mx)), abs(xa + tw - 0.5 - np.float64(mx))) + 1.0
+    dym = max(abs(ya + 0.5 - np.float64(my)), abs(ya + th - 0.5 - np.float64(my))) + 1.0
+    return 1e-5 * (abs(a64) * dxm * dxm + abs(c64) * dym * dym + 2.0 * abs(b64) * dxm * dym)
+
+
+@njit(inline="always", **_OPTS)
+def _axis_range(m, own, other, b, thr, err, start, n):
+    """Indices [lo, hi] of 0..n-1 along one axis (start: the tile's first pixel on it, m: the
+    Gaussian's centre on it) where `col_range` can return columns, for the conic's coefficient `own`
+    of this axis and `other` of the other one: every index outside |d| <= sqrt(2 (err - thr) /
+    (own - b^2 / other)) (widened by one for the rounding of d) gets none."""
+    b64 = np.float64(b)
+    other64 = np.float64(other)
+    if not (other64 > 0.0):
+        return 0, n - 1
+    q = np.float64(own) - b64 * b64 / other64
+    if not (q > 0.0):
+        return 0, n - 1
+    room = (err - np.float64(thr)) * 1.000001 + 1e-9 * abs(np.float64(thr)) + 1e-30
+    if not (room >= 0.0):
+        return 1, 0
+    half = np.sqrt(2.0 * room / q) * 1.000001 + 1.0
+    return _span(np.float64(m) - 0.5 - start, half, n)     # centre: where d = 0
+
+
+@njit(inline="always", **_OPTS)
 def row_range(my, mx, a, b, c, thr, xa, ya, tw, th):
     """Rows [r_lo, r_hi] of a tile where `col_range` can return columns (r_lo > r_hi: none).
 
@@ -59,24 +91,7 @@ def row_range(my, mx, a, b, c, thr, xa, ya, tw, th):
     |dy| <= sqrt(2 (allowance - thr) / (c - b^2 / a)) (widened by one row for the rounding of dy)
     gets no columns from `col_range` anyway.
     """
-    a64 = np.float64(a)
-    b64 = np.float64(b)
-    c64 = np.float64(c)
-    mx64 = np.float64(mx)
-    my64 = np.float64(my)
-    if not (a64 > 0.0):
-        return 0, th - 1
-    q = c64 - b64 * b64 / a64
-    if not (q > 0.0):
-        return 0, th - 1
-    dxm = max(abs(xa + 0.5 - mx64), abs(xa + tw - 0.5 - mx64)) + 1.0
-    dym = max(abs(ya + 0.5 - my64), abs(ya + th - 0.5 - my64)) + 1.0
-    err = 1e-5 * (abs(a64) * dxm * dxm + abs(c64) * dym * dym + 2.0 * abs(b64) * dxm * dym)
-    room = (err - np.float64(thr)) * 1.000001 + 1e-9 * abs(np.float64(thr)) + 1e-30
-    if not (room >= 0.0):
-        return 1, 0
-    half = np.sqrt(2.0 * room / q) * 1.000001 + 1.0
-    return _span(my64 - 0.5 - ya, half, th)          # centre: the row where dy = 0
+    return _axis_range(my, c, a, b, thr, _allowance(my, mx, a, b, c, xa, ya, tw, th), ya, th)
 
 
 @njit(inline="always", **_OPTS)
@@ -89,24 +104,7 @@ def col_bound(my, mx, a, b, c, thr, xa, ya, tw, th):
     is sqrt(2 (allowance - thr) / (a - b^2 / c)), the allowance taken at the tile's farthest column
     and row as in `row_range`.
     """
-    a64 = np.float64(a)
-    b64 = np.float64(b)
-    c64 = np.float64(c)
-    mx64 = np.float64(mx)
-    my64 = np.float64(my)
-    if not (a64 > 0.0) or not (c64 > 0.0):
-        return 0, tw - 1
-    q = a64 - b64 * b64 / c64
-    if not (q > 0.0):
-        return 0, tw - 1
-    dxm = max(abs(xa + 0.5 - mx64), abs(xa + tw - 0.5 - mx64)) + 1.0
-    dym = max(abs(ya + 0.5 - my64), abs(ya + th - 0.5 - my64)) + 1.0
-    err = 1e-5 * (abs(a64) * dxm * dxm + abs(c64) * dym * dym + 2.0 * abs(b64) * dxm * dym)
-    room = (err - np.float64(thr)) * 1.000001 + 1e-9 * abs(np.float64(thr)) + 1e-30
-    if not (room >= 0.0):
-        return 1, 0
-    half = np.sqrt(2.0 * room / q) * 1.000001 + 1.0
-    return _span(mx64 - 0.5 - xa, half, tw)          # centre: the column where dx = 0
+    return _axis_range(mx, a, c, b, thr, _allowance(my, mx, a, b, c, xa, ya, tw, th), xa, tw)
 
 
 @njit(inline="always", **_OPTS)

@@ -105,6 +105,17 @@ def _pix(r, i):
     return (i // HALF) * HPIX + r * HALF + (i - (i // HALF) * HALF)
 
 
+@njit(inline="always", **_OPTS)
+def _pixel_centres(pxw, pxc, pyc, xa, ya, height):
+    """pxw[_pix(r, i)] and pxw[MAXPIX + _pix(r, i)] = the x and y of pixel (r, i)'s centre for every
+    slot of the tile (rows past the image's bottom read its last row: they are masked)."""
+    for r in range(ROW):
+        for i in range(ROW):
+            p = _pix(r, i)
+            pxw[p] = pxc[xa + i]
+            pxw[MAXPIX + p] = pyc[min(ya + r, height - 1)]
+
+
 @njit(**_OPTS)      # not inlined: once per (tile, Gaussian); inlined, it cost 3 s more compilation per dtype
 def _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc):
     """spans[s0:s0 + 4] = first and last row of the left and the right half of the tile that a
@@ -157,11 +168,10 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
         acc = np.zeros(n_ch * MAXPIX, np.float64)  # channel k of pixel p at k * MAXPIX + p
         th = n_pix // tw
         pxw = np.empty(2 * MAXPIX, gp.dtype)       # per pixel: its centre's x and y (working dtype)
+        _pixel_centres(pxw, pxc, pyc, xa, ya, height)
         for r in range(ROW):
             for i in range(ROW):
                 p = _pix(r, i)
-                pxw[p] = pxc[xa + i]
-                pxw[MAXPIX + p] = pyc[min(ya + r, height - 1)]
                 st[p] = 1.0 if (r < th) & (i < tw) else -1.0   # a pixel outside the image is done
                 st[MAXPIX + p] = 0.0
         n_live = n_pix
@@ -331,12 +341,8 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
         sb = np.zeros(n_ch * MAXPIX, np.float64)        # colour behind: channel k of pixel p at k * MAXPIX + p
         gb = np.zeros(n_ch * MAXPIX, np.float64)        # d loss / d channel, same layout
         acc = np.zeros(n_cols, np.float64)
-        pxw = np.zeros(2 * MAXPIX, gp.dtype)             # per pixel: its centre's x and y (working dtype)
-        for r in range(ROW):
-            for i in range(ROW):
-                p = _pix(r, i)
-                pxw[p] = pxc[xa + i]
-                pxw[MAXPIX + p] = pyc[min(ya + r, height - 1)]
+        pxw = np.empty(2 * MAXPIX, gp.dtype)             # per pixel: its centre's x and y (working dtype)
+        _pixel_centres(pxw, pxc, pyc, xa, ya, height)
         j_top = 0
         for r in range(th):
             for i in range(tw):
