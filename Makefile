@@ -17,11 +17,15 @@ $(VPY):
 
 # torch: use the CPU build of 2.13.0 from this machine's disk unless a torch is already importable.
 # pip's build warnings go to .venv/install.log; it is printed only when the install fails.
+# --no-compile, then scripts/warm_imports.py: Python caches the bytecode of the ~2,200 files gsbench
+# imports instead of pip compiling all ~11,000 installed ones (5 s instead of 28 s on 2 cores).
 $(STAMP): pyproject.toml | $(VPY)
 	@$(VPY) -c "import torch" 2>/dev/null || (echo "installing torch==2.13.0 (CPU)"; \
-	  $(VPY) -m pip install --quiet torch==2.13.0 > $(VENV)/torch-install.log 2>&1 || (cat $(VENV)/torch-install.log; exit 1))
+	  $(VPY) -m pip install --quiet --no-compile torch==2.13.0 > $(VENV)/torch-install.log 2>&1 \
+	  || (cat $(VENV)/torch-install.log; exit 1))
 	@echo "installing gsbench[test] into $(VENV) (log: $(VENV)/install.log)"
-	@$(VPY) -m pip install --quiet -e ".[test]" > $(VENV)/install.log 2>&1 || (cat $(VENV)/install.log; exit 1)
+	@$(VPY) -m pip install --quiet --no-compile -e ".[test]" > $(VENV)/install.log 2>&1 || (cat $(VENV)/install.log; exit 1)
+	@env -u PYTHONDONTWRITEBYTECODE $(VPY) scripts/warm_imports.py
 	@touch $@
 
 install: $(STAMP)

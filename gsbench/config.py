@@ -37,9 +37,10 @@ NON_RESULT_KEYS = (("priors", "cache_dir"), ("train", "data_on"))
 _NO_DEFAULT = object()
 
 
-class _Loader(yaml.SafeLoader):
+class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
     """PyYAML's safe loader (YAML 1.1) reads `1e-4` as a string; this one reads it as a float, as YAML 1.2
-    does. A quoted "1e-4" stays a string."""
+    does. A quoted "1e-4" stays a string. It parses with libyaml where PyYAML has it (the same trees,
+    about 10x faster: a grid resolves every cell's config from default.yaml), else in Python."""
 
 
 _Loader.add_implicit_resolver("tag:yaml.org,2002:float",
