@@ -24,8 +24,9 @@ kernels behind a Function over means2d, conics, opacities and channels of a torc
 
 How it runs (kernels in gsbench/render/cpu_binning.py and cpu_kernels.py, which says how they
 vectorise):
-1. sort the visible Gaussians by depth (stable), bin them into 16x16 tiles with the reference's
-   box-overlap test (serial, O(pairs));
+1. sort the visible Gaussians by depth (stable), pack the kernels' inputs in that order in one
+   numba pass (`_pack`), bin them into 16x16 tiles with the reference's box-overlap test (serial,
+   O(pairs));
 2. forward: one task per tile over all cores (numba prange, dynamic chunks of one tile); each
    Gaussian, front to back, is composited into all channels of the tile's pixels; per pixel only
    the final transmittance and the index of the last contributing Gaussian are kept;
@@ -33,7 +34,8 @@ vectorise):
    each (tile, Gaussian) pair gets its own gradient row: the sum over the tile's pixels in
    float64, stored in the working dtype. Tiles are processed in waves (consecutive
    tiles whose rows fit in ROW_BUDGET_BYTES, at least one tile); after each wave the rows are
-   added to the per-Gaussian gradients serially in row order (tile index, then depth rank).
+   added to the per-Gaussian gradients serially in row order (tile index, then depth rank); one
+   numba pass (`_scatter_grads`) hands them to the outputs and to the projection's backward.
 Determinism rule: every pixel and every (tile, Gaussian) row is computed by exactly one task in a
 fixed order, and the reduction is serial in a fixed order, so the same inputs give bit-identical
 outputs and gradients for any number of threads.
@@ -95,6 +97,58 @@ def _numpy64(t: torch.Tensor) -> np.ndarray:
     return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=np.float64)
 
 
+@numba.njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _pack(order, md, conics, op, radii, ch, amin, margin, gp, ch_s, boxes):
+    """The kernels' inputs in depth order, in one pass: gp (M, NPARAM: centre, conic, opacity, THR =
+    log(ALPHA_MIN / max(opacity, ALPHA_MIN)) - margin in float64, rounded), the channels ch_s and the
+    screen boxes (x0, x1, y0, y1) = centre -+ radius exactly as the reference computes them (the
+    working dtype, the same operations)."""
+    r = np.empty(2, md.dtype)           # the radii rounded to the working dtype (a store casts)
+    for k in range(order.size):
+        g = order[k]
+        mx = md[g, 0]
+        my = md[g, 1]
+        gp[k, K.MX] = mx
+        gp[k, K.MY] = my
+        gp[k, K.CA] = conics[g, 0]
+        gp[k, K.CB] = conics[g, 1]
+        gp[k, K.CC] = conics[g, 2]
+        gp[k, K.OP] = op[g]
+        gp[k, K.THR] = np.log(amin / max(np.float64(op[g]), amin)) - margin
+        gp[k, K.THR + 1] = 0.0
+        r[0] = radii[g, 0]
+        r[1] = radii[g, 1]
+        boxes[0, k] = mx - r[0]
+        boxes[1, k] = mx + r[0]
+        boxes[2, k] = my - r[1]
+        boxes[3, k] = my + r[1]
+        for c in range(ch.shape[1]):
+            ch_s[k, c] = ch[g, c]
+
+
+@numba.njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _scatter_grads(full, ids, g_rgb, g_feat, g_m2d, gr):
+    """The raster's gradient rows (M, G_CH + 4 + d; row i = Gaussian ids[i]) to the fused render's
+    outputs in one pass: g_rgb (M, 3) of the visible rows, g_feat (N, d) and g_m2d (N, 2) at rows ids
+    (the others stay zero), and gr (M, NPROJ) float64, the projected rows' gradients that
+    `project_backward` takes (means2d, conic, opacity, depth = camera z)."""
+    for i in range(ids.size):
+        g = ids[i]
+        for k in range(3):
+            g_rgb[i, k] = full[i, K.G_CH + k]
+        for k in range(g_feat.shape[1]):
+            g_feat[g, k] = full[i, K.G_CH + 4 + k]
+        g_m2d[g, 0] = full[i, K.G_MX]
+        g_m2d[g, 1] = full[i, K.G_MY]
+        gr[i, P.P_U] = full[i, K.G_MX]
+        gr[i, P.P_V] = full[i, K.G_MY]
+        gr[i, P.P_CA] = full[i, K.G_CA]
+        gr[i, P.P_CB] = full[i, K.G_CB]
+        gr[i, P.P_CC] = full[i, K.G_CC]
+        gr[i, P.P_OP] = full[i, K.G_OP]
+        gr[i, P.P_Z] = full[i, K.G_CH + 3]
+
+
 def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
     """Sort, bin and composite (numpy arrays in the working dtype; rows = visible Gaussians).
 
@@ -105,20 +159,11 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
     np_dtype = ch.dtype.type
     m, n_ch = ch.shape
     order = cpu_binning.depth_order(z)
-    md = md[order]
-    op = op[order]
-    gp = np.zeros((m, K.NPARAM), dtype=np_dtype)
-    gp[:, K.MX:K.MY + 1] = md
-    gp[:, K.CA:K.CC + 1] = conics[order]
-    gp[:, K.OP] = op
-    op64 = np.maximum(op.astype(np.float64), rules.ALPHA_MIN)
-    gp[:, K.THR] = (np.log(rules.ALPHA_MIN / op64) - SKIP_MARGIN).astype(np_dtype)
-    # screen boxes exactly as the reference computes them (same dtype, same operations)
-    r = radii[order].astype(np_dtype)
-    x0, x1 = md[:, 0] - r[:, 0], md[:, 0] + r[:, 0]
-    y0, y1 = md[:, 1] - r[:, 1], md[:, 1] + r[:, 1]
-    tile_off, ranks = cpu_binning.bin_tiles(x0, x1, y0, y1, width, height, tile_size)
-    ch_s = np.ascontiguousarray(ch[order])
+    gp = np.empty((m, K.NPARAM), dtype=np_dtype)
+    ch_s = np.empty_like(ch)
+    boxes = np.empty((4, m), dtype=np_dtype)
+    _pack(order, md, conics, op, np.ascontiguousarray(radii), ch, rules.ALPHA_MIN, SKIP_MARGIN, gp, ch_s, boxes)
+    tile_off, ranks = cpu_binning.bin_tiles(boxes[0], boxes[1], boxes[2], boxes[3], width, height, tile_size)
     pxc = np.arange(width + K.ROW, dtype=np_dtype) + np_dtype(0.5)   # lanes past the image's edge read it (masked)
     pyc = np.arange(height, dtype=np_dtype) + np_dtype(0.5)
     consts = _consts(np_dtype)
@@ -333,15 +378,9 @@ class _FusedRender(torch.autograd.Function):
                       else _numpy(g_t.to(dtype)))
             with timed("raster_backward"):
                 full = _raster_backward(ctx.state, g_out, g_t_np)
-            g_rgb = full[:, K.G_CH:K.G_CH + 3]
-            g_feat[ids] = full[:, K.G_CH + 4:]
-            g_m2d[ids] = full[:, K.G_MX:K.G_MY + 1]
+            gr = np.empty((m, P.NPROJ), np.float64)
+            _scatter_grads(full, ids, g_rgb, g_feat, g_m2d, gr)
             if any(need[:4]):
-                gr = np.empty((m, P.NPROJ), np.float64)
-                gr[:, P.P_U:P.P_V + 1] = full[:, K.G_MX:K.G_MY + 1]
-                gr[:, P.P_CA:P.P_CC + 1] = full[:, K.G_CA:K.G_CC + 1]
-                gr[:, P.P_OP] = full[:, K.G_OP]
-                gr[:, P.P_Z] = full[:, K.G_CH + 3]
                 set_numba_threads()
                 with timed("projection_backward"):
                     P.project_backward(ids, proj.pc, proj.log_scales, proj.quats, proj.logits, proj.cam, gr,
