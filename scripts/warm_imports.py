@@ -16,15 +16,20 @@ import pkgutil
 MAPPED = ("gsbench.methods", "gsbench.datasets", "gsbench.metrics", "gsbench.reports")
 
 
-def main() -> int:
-    names = {"gsbench"}
+def import_all() -> list[str]:
+    """Import every module of the package; returns their names."""
+    names = set()
     for top in ("gsbench", *MAPPED):
         pkg = importlib.import_module(top)
         names.add(top)
         names.update(m.name for m in pkgutil.walk_packages(pkg.__path__, top + "."))
     for name in sorted(names):
         importlib.import_module(name)
-    print(f"imported {len(names)} gsbench modules")
+    return sorted(names)
+
+
+def main() -> int:
+    print(f"imported {len(import_all())} gsbench modules")
     return 0
 
 

@@ -329,3 +329,27 @@ def test_one_config_hash_rule_for_run_ids_and_config_keys():
     s["seed"] = 7
     assert run_id(a, "fp") != run_id(s, "fp") and config_key(a) == config_key(s)
     assert run_id(a, "fp") != run_id(a, "other scene")
+
+
+def test_the_yaml_reader_gives_pythons_parser_trees_for_every_shipped_file():
+    """load_yaml parses with libyaml where PyYAML has it; PyYAML's Python parser, with the same
+    float rule, must read every shipped config, preset and grid file to the same tree."""
+    from pathlib import Path
+
+    import yaml
+
+    import gsbench
+    from gsbench import config
+
+    class PythonLoader(yaml.SafeLoader):      # the same resolvers, PyYAML's Python parser
+        yaml_implicit_resolvers = config._Loader.yaml_implicit_resolvers
+
+    load_yaml = config.load_yaml
+    files = sorted(Path(gsbench.__file__).parent.rglob("*.yaml"))
+    assert len(files) >= 20
+    for f in files:
+        text = f.read_text()
+        assert load_yaml(text) == yaml.load(text, Loader=PythonLoader), f
+    text = "a: 1e-4\nb: '1e-4'\nc: -2.5E+3\nd: [1, 2]\ne: null\nf: yes\ng: 0x10\nh: 1_000"
+    assert load_yaml(text) == yaml.load(text, Loader=PythonLoader) == {
+        "a": 1e-4, "b": "1e-4", "c": -2500.0, "d": [1, 2], "e": None, "f": True, "g": 16, "h": 1000}
