@@ -114,8 +114,9 @@ def _pack(order, md, conics, op, radii, ch, amin, margin, gp, ch_s, boxes):
         gp[k, K.CB] = conics[g, 1]
         gp[k, K.CC] = conics[g, 2]
         gp[k, K.OP] = op[g]
-        gp[k, K.THR] = np.log(amin / max(np.float64(op[g]), amin)) - margin
-        gp[k, K.THR + 1] = 0.0
+        gp[k, K.THR] = np.log(amin / np.maximum(np.float64(op[g]), amin)) - margin   # NaN stays NaN
+        for j in range(K.THR + 1, K.NPARAM):
+            gp[k, j] = 0.0
         r[0] = radii[g, 0]
         r[1] = radii[g, 1]
         boxes[0, k] = mx - r[0]
