@@ -62,9 +62,9 @@ def _cpu_kernels(*ts: torch.Tensor) -> bool:
     return True
 
 
-def _cpu_masks(like: torch.Tensor, *masks: torch.Tensor) -> bool:
-    """Whether these are bool CPU masks of the (H, W) of an (H, W, d) map."""
-    return all(m.dtype == torch.bool and m.device.type == "cpu" and m.shape == like.shape[:-1] for m in masks)
+def _cpu_masks(shape: torch.Size, *masks: torch.Tensor) -> bool:
+    """Whether these are bool CPU masks of this shape."""
+    return all(m.dtype == torch.bool and m.device.type == "cpu" and m.shape == shape for m in masks)
 
 
 # ---------------------------------------------------------------------------- SSIM / reconstruction
@@ -262,8 +262,7 @@ def depth_loss(formulation: str, depth: torch.Tensor, prior: np.ndarray | torch.
     p = p.to(device=dev, dtype=depth.dtype)
     pv = prior_valid if isinstance(prior_valid, torch.Tensor) else torch.as_tensor(_np_bool(prior_valid))
     if (formulation == "scale_shift" and kind in ("disparity", "depth", "metric") and _cpu_kernels(depth, p)
-            and pv.dtype == torch.bool and pv.device.type == "cpu" and pv.shape == depth.shape
-            and not p.requires_grad):
+            and _cpu_masks(depth.shape, pv) and not p.requires_grad):
         loss, ok, s, t, n = LC.scale_shift_loss_cpu(depth, p, pv, kind == "disparity", DEPTH_EPS, min_valid,
                                                     CONSTANT_REL_EPS)
         return DepthTerm(loss, ok, s, t, n, int(min_valid))
@@ -343,7 +342,7 @@ def tv_loss(depth: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
 def sem_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor) -> torch.Tensor:
     """mean |S_hat - S| over pixels with a target (and channels), as a masked sum (no host sync);
     0 when no pixel has one: the caller knows that per view up front and counts the skip."""
-    if s_hat.dim() >= 1 and _cpu_kernels(s_hat, target) and _cpu_masks(s_hat, has_target):
+    if s_hat.dim() >= 1 and _cpu_kernels(s_hat, target) and _cpu_masks(s_hat.shape[:-1], has_target):
         return LC.masked_abs_mean_cpu(s_hat, target, has_target)
     w = has_target.to(s_hat.dtype)[..., None]
     n = w.sum() * s_hat.shape[-1]
@@ -360,7 +359,7 @@ def ds_loss(s_hat: torch.Tensor, target: torch.Tensor, has_target: torch.Tensor,
     the image the edges cover). E_d (H, W) in {0, 1}; 0 when no pixel counts."""
     if average not in DS_AVERAGES:
         raise ValueError(f"average must be one of {DS_AVERAGES}, got {average!r}")
-    if s_hat.dim() >= 1 and _cpu_kernels(s_hat, target) and _cpu_masks(s_hat, has_target, edges):
+    if s_hat.dim() >= 1 and _cpu_kernels(s_hat, target) and _cpu_masks(s_hat.shape[:-1], has_target, edges):
         return LC.masked_abs_mean_cpu(s_hat, target, has_target, edges, average == "edges")
     w = has_target.to(s_hat.dtype)[..., None]
     we = edges.to(s_hat.dtype)[..., None] * w

@@ -141,22 +141,6 @@ def _scale_int8(sg, scale, out):
 
 
 @njit(**_OPTS)
-def _pair_sums(x, y):
-    """(sum x, sum y) in float64 (blocks converted to float64 first: the conversion vectorises)."""
-    ax, ay = np.zeros(8), np.zeros(8)
-    bx, by = np.empty(BLOCK), np.empty(BLOCK)
-    for o in range(0, x.size, BLOCK):
-        m = min(BLOCK, x.size - o)
-        xv, yv = x[o:o + m], y[o:o + m]
-        for i in range(m):
-            bx[i] = xv[i]
-            by[i] = yv[i]
-        _addto(ax, bx, m)
-        _addto(ay, by, m)
-    return _total(ax), _total(ay)
-
-
-@njit(**_OPTS)
 def _expected_fwd(d, a, eps, out):
     """out = d / a where a > eps (eps in a's dtype: there the clamp_min(eps) is inactive), 0 elsewhere."""
     for i in range(d.size):

@@ -13,14 +13,19 @@ from numba.extending import intrinsic, overload
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
 
 
-@intrinsic
-def _i64_as_f64(typingctx, x):
-    """The float64 whose bits are the int64 x (vectorisable, unlike a view of an array)."""
-    sig = types.float64(types.int64)
+def _bits_as(int_type, float_type):
+    """An intrinsic taking an integer of int_type to the float of float_type with the same bits
+    (vectorisable, unlike a view of an array)."""
+    @intrinsic
+    def bitcast(typingctx, x):
+        def codegen(context, builder, signature, args):
+            return builder.bitcast(args[0], context.get_value_type(float_type))
+        return float_type(int_type), codegen
+    return bitcast
 
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], context.get_value_type(types.float64))
-    return sig, codegen
+
+_i64_as_f64 = _bits_as(types.int64, types.float64)
+_i32_as_f32 = _bits_as(types.int32, types.float32)
 
 
 _LN2_HI = 6.93147180369123816490e-01      # ln 2 split so that n * _LN2_HI is exact for |n| < 2^20
@@ -50,16 +55,6 @@ def _exp(x):
     q2 = (1.0 / 40320.0 + r * (1.0 / 362880.0)) + (1.0 / 3628800.0 + r * (1.0 / 39916800.0)) * r2
     p = (q0 + q1 * r4) + (q2 + (1.0 / 479001600.0) * r4) * r8
     return p * _i64_as_f64((np.int64(n) + 1023) << 52)
-
-
-@intrinsic
-def _i32_as_f32(typingctx, x):
-    """The float32 whose bits are the int32 x (vectorisable)."""
-    sig = types.float32(types.int32)
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], context.get_value_type(types.float32))
-    return sig, codegen
 
 
 _F32 = np.float32
