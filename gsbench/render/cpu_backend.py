@@ -27,13 +27,16 @@ vectorise):
 1. sort the visible Gaussians by depth (stable), pack the kernels' inputs in that order in one
    numba pass (`_pack`), bin them into 16x16 tiles with the reference's box-overlap test (serial,
    O(pairs));
-2. forward: one task per tile over all cores (numba prange, dynamic chunks of one tile); each
-   Gaussian, front to back, is composited into all channels of the tile's pixels; per pixel only
-   the final transmittance and the index of the last contributing Gaussian are kept;
+2. forward: one worker per thread (numba prange), each taking the next tile, costliest first, from
+   a shared counter until none is left (gsbench/render/cpu_sched.py: numba's `workqueue` layer
+   splits a prange statically); each Gaussian of a tile, front to back, is composited into all
+   channels of its pixels; per pixel only the final transmittance and the index of the last
+   contributing Gaussian are kept;
 3. backward: per tile, back to front, the transmittance is recovered as T_k = T_{k+1} / (1 - a_k);
    each (tile, Gaussian) pair gets its own gradient row: the sum over the tile's pixels in
    float64, stored in the working dtype. Tiles are processed in waves (consecutive
-   tiles whose rows fit in ROW_BUDGET_BYTES, at least one tile); after each wave the rows are
+   tiles whose rows fit in ROW_BUDGET_BYTES, at least one tile; within a wave, scheduled as the
+   forward's); after each wave the rows are
    added to the per-Gaussian gradients serially in row order (tile index, then depth rank); one
    numba pass (`_scatter_grads`) hands them to the outputs and to the projection's backward.
 Determinism rule: every pixel and every (tile, Gaussian) row is computed by exactly one task in a
@@ -59,7 +62,7 @@ import torch
 from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
 from gsbench.phases import timed
-from gsbench.render import cpu_binning, rules
+from gsbench.render import cpu_binning, cpu_sched, rules
 from gsbench.render import cpu_kernels as K
 from gsbench.render import cpu_projection as P
 from gsbench.render.projection import Projected, camera_tensors
@@ -84,9 +87,11 @@ def _consts(np_dtype) -> np.ndarray:
     return c
 
 
-def set_numba_threads() -> None:
-    """numba's thread count for the next parallel kernel: torch's, within NUMBA_NUM_THREADS."""
-    numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
+def set_numba_threads() -> int:
+    """numba's thread count for the next parallel kernel: torch's, within NUMBA_NUM_THREADS (returned)."""
+    n = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(n)
+    return n
 
 
 def _numpy(t: torch.Tensor) -> np.ndarray:
@@ -174,10 +179,9 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
     t64 = np.empty((height, width), dtype=np.float64)
     last = np.empty((height, width), dtype=np.int32)
     spans = np.empty(4 * int(tile_off[-1]), dtype=np.int8)
-    set_numba_threads()
-    with numba.parallel_chunksize(1):
-        K.raster_forward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                         out, t_out, t64, last, spans)
+    K.raster_forward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
+                     out, t_out, t64, last, spans, cpu_sched.tile_queue(tile_off), np.zeros(1, np.int64),
+                     set_numba_threads())
     state = (gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order, spans)
     return out, t_out, state
 
@@ -190,7 +194,7 @@ def _raster_backward(state, g_out_np, g_t_np) -> np.ndarray:
     full = np.zeros((m, n_cols), dtype=gp.dtype)
     n_tiles = tile_off.size - 1
     budget = max(1, ROW_BUDGET_BYTES // (gp.itemsize * n_cols))
-    set_numba_threads()
+    n_workers = set_numba_threads()
     waves = []                # consecutive tiles whose rows fit in the budget (at least one tile)
     t_lo = 0
     while t_lo < n_tiles:
@@ -203,9 +207,9 @@ def _raster_backward(state, g_out_np, g_t_np) -> np.ndarray:
     max_rows = max((int(tile_off[b] - tile_off[a]) for a, b in waves), default=0)
     rows = np.empty((max_rows, n_cols), dtype=gp.dtype)
     for t_lo, t_hi in waves:
-        with numba.parallel_chunksize(1):
-            K.raster_backward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                              t64, last, g_out_np, g_t_np, t_lo, t_hi, rows, spans)
+        K.raster_backward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last,
+                          g_out_np, g_t_np, t_lo, t_hi, rows, spans, cpu_sched.tile_queue(tile_off, t_lo, t_hi),
+                          np.zeros(1, np.int64), n_workers)
         K.reduce_rows(tile_off, ranks, order, t_lo, t_hi, rows, full)
     return full
 

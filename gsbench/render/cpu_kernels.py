@@ -59,6 +59,7 @@ from numba import njit, prange
 
 from gsbench.render.cpu_bounds import col_bound, row_range, tight_rows
 from gsbench.render.cpu_exp import _expw, _like
+from gsbench.render.cpu_sched import fetch_add
 
 MX, MY, CA, CB, CC, OP, THR = 0, 1, 2, 3, 4, 5, 6
 NPARAM = 8                      # padded to 8 values per Gaussian
@@ -141,7 +142,7 @@ def _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc):
 
 @njit(parallel=True, **_OPTS)
 def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                   out, t_out, t64_out, last_out, spans):
+                   out, t_out, t64_out, last_out, spans, queue, counter, n_workers):
     """Fused forward: all channels of every pixel, one tile per task.
 
     Gaussians are visited front to back, each over the half rows it can reach (`_half_rows`):
@@ -151,7 +152,8 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
     channel sums, t_out (H,W) final transmittance (working dtype), t64_out (H,W) the same in
     float64, last_out (H,W) = 1 + tile-list position of the last contributing Gaussian and spans
     (4 x pairs, int8) the first and last row of each half of each pair it visited (first > last:
-    none), for the backward.
+    none), for the backward. Each of the n_workers prange iterations takes tiles from `queue`
+    through `counter` (gsbench/render/cpu_sched.py) until none is left.
     """
     height, width, n_ch = out.shape
     n_tiles = tile_off.size - 1
@@ -161,89 +163,94 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
     amax = consts[K_AMAX]
     amin = consts[K_AMIN]
     tmin = consts[K_TMIN]
-    for t in prange(n_tiles):
-        xa, ya, tw, n_pix = _tile_box(t, tiles_x, tile_size, width, height)
-        st = np.empty(2 * MAXPIX, np.float64)      # [0, MAXPIX): transmittance (<0: done); then last + 1
-        wb = np.zeros(MAXPIX, gp.dtype)            # weight of the current Gaussian (0: no contribution)
-        acc = np.zeros(n_ch * MAXPIX, np.float64)  # channel k of pixel p at k * MAXPIX + p
-        th = n_pix // tw
-        pxw = np.empty(2 * MAXPIX, gp.dtype)       # per pixel: its centre's x and y (working dtype)
-        _pixel_centres(pxw, pxc, pyc, xa, ya, height)
-        for r in range(ROW):
-            for i in range(ROW):
-                p = _pix(r, i)
-                st[p] = 1.0 if (r < th) & (i < tw) else -1.0   # a pixel outside the image is done
-                st[MAXPIX + p] = 0.0
-        n_live = n_pix
-        start = tile_off[t]
-        n = tile_off[t + 1] - start
-        for j in range(n):
-            g = ranks[start + j]
-            mx = gp[g, MX]
-            my = gp[g, MY]
-            a = gp[g, CA]
-            b = gp[g, CB]
-            c = gp[g, CC]
-            op = gp[g, OP]
-            thr = gp[g, THR]
-            jp1 = np.float64(j + 1)
-            s0 = 4 * (start + j)
-            _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc)
-            for h in range(2):
-                r_lo = np.int64(spans[s0 + 2 * h])
-                r_hi = np.int64(spans[s0 + 2 * h + 1])
-                if r_hi < r_lo:
-                    continue
-                hb = np.uint64(h * HPIX)
-                c_lo = ROW                     # first and last block where the Gaussian contributes
-                c_hi = -1
-                for blk in range(r_lo // 2, r_hi // 2 + 1):
-                    # the BLK lanes of a block (two half rows), branch-free (masks instead of `continue`),
-                    # over unsigned indices (numba then emits no negative-index wraparound): LLVM vectorises it
-                    rb = hb + np.uint64(blk * BLK)
-                    n_stop = 0
-                    n_con = 0
-                    for i in range(np.uint64(0), np.uint64(BLK)):
-                        p = rb + i
-                        dx = pxw[p] - mx
-                        dy = pxw[UMAXPIX + p] - my
-                        power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
-                        alpha = min(op * _expw(power), amax)
-                        tp = st[p]
-                        ok = (power <= zero) & (power >= thr) & (alpha >= amin) & (tp > 0.0)
-                        tn = tp * (one - alpha)
-                        con = ok & (_like(tn, power) > tmin)
-                        wb[p] = alpha * _like(tp, power) if con else zero
-                        st[p] = tn if con else (-tp if ok else tp)
-                        st[UMAXPIX + p] = jp1 if con else st[UMAXPIX + p]
-                        n_stop += ok != con
-                        n_con += con
-                    n_live -= n_stop
-                    if n_con > 0:
-                        c_lo = min(c_lo, blk)
-                        c_hi = blk
-                p0 = hb + np.uint64(c_lo * BLK)
-                p1 = hb + np.uint64((c_hi + 1) * BLK)
-                for k in range(n_ch if c_hi >= c_lo else 0):
-                    cv = ch[g, k]
-                    ab = np.uint64(k * MAXPIX)
-                    for p in range(p0, p1):
-                        w = wb[p]
-                        v = w * cv
-                        acc[ab + p] += v if w != zero else 0.0
-            if n_live == 0:
+    for _w in prange(n_workers):
+        while True:
+            q = fetch_add(counter, 1)
+            if q >= n_tiles:
                 break
-        for r in range(th):
-            for i in range(tw):
-                p = _pix(r, i)
-                py = ya + r
-                px = xa + i
-                for k in range(n_ch):
-                    out[py, px, k] = acc[k * MAXPIX + p]
-                tf = abs(st[p])
-                t_out[py, px] = tf
-                t64_out[py, px] = tf
-                last_out[py, px] = np.int32(st[MAXPIX + p])
+            t = queue[q]
+            xa, ya, tw, n_pix = _tile_box(t, tiles_x, tile_size, width, height)
+            st = np.empty(2 * MAXPIX, np.float64)      # [0, MAXPIX): transmittance (<0: done); then last + 1
+            wb = np.zeros(MAXPIX, gp.dtype)            # weight of the current Gaussian (0: no contribution)
+            acc = np.zeros(n_ch * MAXPIX, np.float64)  # channel k of pixel p at k * MAXPIX + p
+            th = n_pix // tw
+            pxw = np.empty(2 * MAXPIX, gp.dtype)       # per pixel: its centre's x and y (working dtype)
+            _pixel_centres(pxw, pxc, pyc, xa, ya, height)
+            for r in range(ROW):
+                for i in range(ROW):
+                    p = _pix(r, i)
+                    st[p] = 1.0 if (r < th) & (i < tw) else -1.0   # a pixel outside the image is done
+                    st[MAXPIX + p] = 0.0
+            n_live = n_pix
+            start = tile_off[t]
+            n = tile_off[t + 1] - start
+            for j in range(n):
+                g = ranks[start + j]
+                mx = gp[g, MX]
+                my = gp[g, MY]
+                a = gp[g, CA]
+                b = gp[g, CB]
+                c = gp[g, CC]
+                op = gp[g, OP]
+                thr = gp[g, THR]
+                jp1 = np.float64(j + 1)
+                s0 = 4 * (start + j)
+                _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc)
+                for h in range(2):
+                    r_lo = np.int64(spans[s0 + 2 * h])
+                    r_hi = np.int64(spans[s0 + 2 * h + 1])
+                    if r_hi < r_lo:
+                        continue
+                    hb = np.uint64(h * HPIX)
+                    c_lo = ROW                     # first and last block where the Gaussian contributes
+                    c_hi = -1
+                    for blk in range(r_lo // 2, r_hi // 2 + 1):
+                        # the BLK lanes of a block (two half rows), branch-free (masks instead of `continue`),
+                        # over unsigned indices (numba then emits no negative-index wraparound): LLVM vectorises it
+                        rb = hb + np.uint64(blk * BLK)
+                        n_stop = 0
+                        n_con = 0
+                        for i in range(np.uint64(0), np.uint64(BLK)):
+                            p = rb + i
+                            dx = pxw[p] - mx
+                            dy = pxw[UMAXPIX + p] - my
+                            power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
+                            alpha = min(op * _expw(power), amax)
+                            tp = st[p]
+                            ok = (power <= zero) & (power >= thr) & (alpha >= amin) & (tp > 0.0)
+                            tn = tp * (one - alpha)
+                            con = ok & (_like(tn, power) > tmin)
+                            wb[p] = alpha * _like(tp, power) if con else zero
+                            st[p] = tn if con else (-tp if ok else tp)
+                            st[UMAXPIX + p] = jp1 if con else st[UMAXPIX + p]
+                            n_stop += ok != con
+                            n_con += con
+                        n_live -= n_stop
+                        if n_con > 0:
+                            c_lo = min(c_lo, blk)
+                            c_hi = blk
+                    p0 = hb + np.uint64(c_lo * BLK)
+                    p1 = hb + np.uint64((c_hi + 1) * BLK)
+                    for k in range(n_ch if c_hi >= c_lo else 0):
+                        cv = ch[g, k]
+                        ab = np.uint64(k * MAXPIX)
+                        for p in range(p0, p1):
+                            w = wb[p]
+                            v = w * cv
+                            acc[ab + p] += v if w != zero else 0.0
+                if n_live == 0:
+                    break
+            for r in range(th):
+                for i in range(tw):
+                    p = _pix(r, i)
+                    py = ya + r
+                    px = xa + i
+                    for k in range(n_ch):
+                        out[py, px, k] = acc[k * MAXPIX + p]
+                    tf = abs(st[p])
+                    t_out[py, px] = tf
+                    t64_out[py, px] = tf
+                    last_out[py, px] = np.int32(st[MAXPIX + p])
 
 
 _SUM_OPTS = dict(_OPTS, fastmath={"reassoc", "nsz"})
@@ -308,7 +315,7 @@ def _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1):
 
 @njit(parallel=True, **_OPTS)
 def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                    t64_in, last_in, g_out, g_t, t_lo, t_hi, rows, spans):
+                    t64_in, last_in, g_out, g_t, t_lo, t_hi, rows, spans, queue, counter, n_workers):
     """Gradient rows of tiles [t_lo, t_hi): row tile_off[t] - tile_off[t_lo] + j is the gradient
     contribution of the tile's j-th Gaussian, summed in float64 over the tile's pixels and stored
     in the dtype of `rows`.
@@ -317,7 +324,8 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
     T_j = T_{j+1} / (1 - alpha_j) from the stored final value) and the colour behind it. Per
     Gaussian, three branch-free passes over the pixels of the rows the forward recorded in `spans`
     (vectorised like the forward): the lane pass (alpha, transmittance, weight, G), then
-    `_bwd_channels` and `_bwd_geometry`. Pixels that do not contribute add exact zeros.
+    `_bwd_channels` and `_bwd_geometry`. Pixels that do not contribute add exact zeros. Workers
+    take the tiles of `queue` (t_hi - t_lo of them) as in `raster_forward`.
     """
     height, width, n_ch = g_out.shape
     one = consts[K_ONE]
@@ -327,94 +335,98 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
     amin = consts[K_AMIN]
     base = tile_off[t_lo]
     n_cols = rows.shape[1]
-    for ti in prange(t_hi - t_lo):
-        t = t_lo + ti
-        start = tile_off[t]
-        n = tile_off[t + 1] - start
-        r0 = start - base
-        if n == 0:
-            continue
-        xa, ya, tw, n_pix = _tile_box(t, tiles_x, tile_size, width, height)
-        th = n_pix // tw
-        px = np.zeros(3 * MAXPIX, np.float64)           # per pixel: transmittance, g_T * T_final, last
-        lb = np.zeros(NLANE * MAXPIX, np.float64)       # per pixel, current Gaussian: L_* terms
-        sb = np.zeros(n_ch * MAXPIX, np.float64)        # colour behind: channel k of pixel p at k * MAXPIX + p
-        gb = np.zeros(n_ch * MAXPIX, np.float64)        # d loss / d channel, same layout
-        acc = np.zeros(n_cols, np.float64)
-        pxw = np.empty(2 * MAXPIX, gp.dtype)             # per pixel: its centre's x and y (working dtype)
-        _pixel_centres(pxw, pxc, pyc, xa, ya, height)
-        j_top = 0
-        for r in range(th):
-            for i in range(tw):
-                p = _pix(r, i)
-                py = ya + r
-                pxx = xa + i
-                tf = t64_in[py, pxx]
-                px[X_TR * MAXPIX + p] = tf
-                px[X_TG * MAXPIX + p] = np.float64(g_t[py, pxx]) * tf
-                lj = last_in[py, pxx]
-                px[X_LAST * MAXPIX + p] = lj
-                j_top = max(j_top, lj)
-                for k in range(n_ch):
-                    gb[k * MAXPIX + p] = g_out[py, pxx, k]
-        for j in range(j_top, n):
-            for k in range(n_cols):
-                rows[r0 + j, k] = 0.0
-        for j in range(j_top - 1, -1, -1):
-            g = ranks[start + j]
-            mx = gp[g, MX]
-            my = gp[g, MY]
-            a = gp[g, CA]
-            b = gp[g, CB]
-            c = gp[g, CC]
-            op = gp[g, OP]
-            thr = gp[g, THR]
-            a64 = np.float64(a)
-            b64 = np.float64(b)
-            c64 = np.float64(c)
-            jf = np.float64(j)
-            for k in range(n_cols):
-                acc[k] = 0.0
-            s0 = 4 * (start + j)
-            for h in range(2):
-                r_lo = np.int64(spans[s0 + 2 * h])
-                r_hi = np.int64(spans[s0 + 2 * h + 1])
-                if r_hi < r_lo:
-                    continue
-                hb = np.uint64(h * HPIX)
-                u_lo = ROW                                  # first and last block with a contributing pixel
-                u_hi = -1
-                for blk in range(r_lo // 2, r_hi // 2 + 1):
-                    rb = hb + np.uint64(blk * BLK)
-                    n_v = 0
-                    for i in range(np.uint64(0), np.uint64(BLK)):
-                        p = rb + i
-                        dx = pxw[UW_X + p] - mx
-                        dy = pxw[UW_Y + p] - my
-                        power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
-                        G = _expw(power)
-                        alpha = min(op * G, amax)
-                        v = ((power <= zero) & (power >= thr) & (alpha >= amin) & (jf < px[UX_LAST + p]))
-                        al64 = np.float64(alpha)
-                        om = np.float64(one - alpha)
-                        tr0 = px[UX_TR + p]
-                        trn = tr0 / om                      # transmittance before Gaussian j
-                        px[UX_TR + p] = trn if v else tr0
-                        lb[UL_AL + p] = al64 if v else 0.0  # alpha >= ALPHA_MIN > 0 where v: AL != 0 is v
-                        lb[UL_OM + p] = om if v else 1.0
-                        lb[UL_W + p] = al64 * trn if v else 0.0
-                        lb[UL_G + p] = np.float64(G)
-                        n_v += v
-                    if n_v > 0:
-                        u_lo = min(u_lo, blk)
-                        u_hi = blk
-                if u_hi >= u_lo:
-                    p0 = hb + np.uint64(u_lo * BLK)
-                    p1 = hb + np.uint64((u_hi + 1) * BLK)
-                    _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1)
-                    _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
-            for k in range(n_cols):
-                rows[r0 + j, k] = acc[k]
+    for _w in prange(n_workers):
+        while True:
+            q = fetch_add(counter, 1)
+            if q >= t_hi - t_lo:
+                break
+            t = queue[q]
+            start = tile_off[t]
+            n = tile_off[t + 1] - start
+            r0 = start - base
+            if n == 0:
+                continue
+            xa, ya, tw, n_pix = _tile_box(t, tiles_x, tile_size, width, height)
+            th = n_pix // tw
+            px = np.zeros(3 * MAXPIX, np.float64)           # per pixel: transmittance, g_T * T_final, last
+            lb = np.zeros(NLANE * MAXPIX, np.float64)       # per pixel, current Gaussian: L_* terms
+            sb = np.zeros(n_ch * MAXPIX, np.float64)        # colour behind: channel k of pixel p at k * MAXPIX + p
+            gb = np.zeros(n_ch * MAXPIX, np.float64)        # d loss / d channel, same layout
+            acc = np.zeros(n_cols, np.float64)
+            pxw = np.empty(2 * MAXPIX, gp.dtype)             # per pixel: its centre's x and y (working dtype)
+            _pixel_centres(pxw, pxc, pyc, xa, ya, height)
+            j_top = 0
+            for r in range(th):
+                for i in range(tw):
+                    p = _pix(r, i)
+                    py = ya + r
+                    pxx = xa + i
+                    tf = t64_in[py, pxx]
+                    px[X_TR * MAXPIX + p] = tf
+                    px[X_TG * MAXPIX + p] = np.float64(g_t[py, pxx]) * tf
+                    lj = last_in[py, pxx]
+                    px[X_LAST * MAXPIX + p] = lj
+                    j_top = max(j_top, lj)
+                    for k in range(n_ch):
+                        gb[k * MAXPIX + p] = g_out[py, pxx, k]
+            for j in range(j_top, n):
+                for k in range(n_cols):
+                    rows[r0 + j, k] = 0.0
+            for j in range(j_top - 1, -1, -1):
+                g = ranks[start + j]
+                mx = gp[g, MX]
+                my = gp[g, MY]
+                a = gp[g, CA]
+                b = gp[g, CB]
+                c = gp[g, CC]
+                op = gp[g, OP]
+                thr = gp[g, THR]
+                a64 = np.float64(a)
+                b64 = np.float64(b)
+                c64 = np.float64(c)
+                jf = np.float64(j)
+                for k in range(n_cols):
+                    acc[k] = 0.0
+                s0 = 4 * (start + j)
+                for h in range(2):
+                    r_lo = np.int64(spans[s0 + 2 * h])
+                    r_hi = np.int64(spans[s0 + 2 * h + 1])
+                    if r_hi < r_lo:
+                        continue
+                    hb = np.uint64(h * HPIX)
+                    u_lo = ROW                                  # first and last block with a contributing pixel
+                    u_hi = -1
+                    for blk in range(r_lo // 2, r_hi // 2 + 1):
+                        rb = hb + np.uint64(blk * BLK)
+                        n_v = 0
+                        for i in range(np.uint64(0), np.uint64(BLK)):
+                            p = rb + i
+                            dx = pxw[UW_X + p] - mx
+                            dy = pxw[UW_Y + p] - my
+                            power = mhalf * (a * dx * dx + c * dy * dy) - b * dx * dy
+                            G = _expw(power)
+                            alpha = min(op * G, amax)
+                            v = ((power <= zero) & (power >= thr) & (alpha >= amin) & (jf < px[UX_LAST + p]))
+                            al64 = np.float64(alpha)
+                            om = np.float64(one - alpha)
+                            tr0 = px[UX_TR + p]
+                            trn = tr0 / om                      # transmittance before Gaussian j
+                            px[UX_TR + p] = trn if v else tr0
+                            lb[UL_AL + p] = al64 if v else 0.0  # alpha >= ALPHA_MIN > 0 where v: AL != 0 is v
+                            lb[UL_OM + p] = om if v else 1.0
+                            lb[UL_W + p] = al64 * trn if v else 0.0
+                            lb[UL_G + p] = np.float64(G)
+                            n_v += v
+                        if n_v > 0:
+                            u_lo = min(u_lo, blk)
+                            u_hi = blk
+                    if u_hi >= u_lo:
+                        p0 = hb + np.uint64(u_lo * BLK)
+                        p1 = hb + np.uint64((u_hi + 1) * BLK)
+                        _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1)
+                        _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
+                for k in range(n_cols):
+                    rows[r0 + j, k] = acc[k]
 
 
 @njit(**_OPTS)
