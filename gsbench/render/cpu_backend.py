@@ -72,7 +72,7 @@ from gsbench.render.projection import Projected, camera_tensors
 os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
 
-ROW_BUDGET_BYTES = 2 * 2**20     # gradient rows of one backward wave (working dtype; at least one tile)
+ROW_BUDGET_BYTES = 16 * 2**20    # gradient rows of one backward wave (working dtype; at least one tile)
 SKIP_MARGIN = 1e-3              # see cpu_kernels: exponent bound below which alpha < ALPHA_MIN surely
 
 

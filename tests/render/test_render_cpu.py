@@ -359,7 +359,8 @@ def test_backward_in_many_waves_matches(monkeypatch):
     o2, g2 = run(field, cam, "cpu")
     ot, gt = run(field, cam, "torch")
     assert torch.equal(o1.rgb, o2.rgb)
-    assert_grads_close(g2, g1, 1e-6)     # only the float32 rounding of per-wave partial sums differs
+    for k in g1:      # each Gaussian's rows are added in tile order however the tiles are cut into waves
+        assert torch.equal(g1[k], g2[k]), k
     assert_grads_close(g2, gt, 1e-4)
 
 
