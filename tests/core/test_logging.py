@@ -28,7 +28,7 @@ def test_startup_sets_the_process_settings_once(monkeypatch):
     gsbench.startup()
     assert calls == [True]
     import os
-    assert os.environ["GOMP_SPINCOUNT"] == "30000"
+    assert os.environ["GOMP_SPINCOUNT"] == "0"
 
 
 def test_startup_keeps_a_spincount_the_user_set(monkeypatch):
