@@ -33,11 +33,11 @@ How the work is laid out (the speed comes from SIMD over the pixels of a tile):
   are two consecutive half rows, a block (BLK lanes, the unit of work);
 - per tile, Gaussians outer (front to back in the forward, back to front in the backward); per
   Gaussian only the halves and rows of the tile it can reach (gsbench/render/cpu_bounds.py,
-  `_half_rows`): `row_range` and `col_bound`, rigorous bounds on where the exponent can reach THR,
-  then per half the rows narrowed from both ends to those where `col_range` finds columns
-  (`tight_rows`). The forward stores each (tile, Gaussian) pair's rows per half in `spans`; the
-  backward walks the same ones. A Gaussian a few pixels wide then costs half the lanes a whole
-  tile row would;
+  `_half_rows`): `row_range` and `col_bound`, rigorous bounds on where the exponent can reach THR.
+  The forward records in `spans`, per (tile, Gaussian) pair and half, the blocks where the pair
+  contributed; the backward walks only those (a pixel contributes in the backward exactly when it
+  did in the forward, so the blocks it skips hold no contribution). A Gaussian a few pixels wide
+  then costs half the lanes a whole tile row would;
 - each block is walked over all BLK lanes in a loop without branches (the skip rules are masks;
   a pixel outside the image starts "done"), over unsigned indices, with each pixel's centre read
   from a per-tile array: LLVM vectorises these loops. The channels are then composited, one loop
@@ -57,7 +57,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from gsbench.render.cpu_bounds import col_bound, row_range, tight_rows
+from gsbench.render.cpu_bounds import col_bound, row_range
 from gsbench.render.cpu_exp import _expw, _like
 from gsbench.render.cpu_sched import fetch_add
 
@@ -118,10 +118,9 @@ def _pixel_centres(pxw, pxc, pyc, xa, ya, height):
 
 
 @njit(**_OPTS)      # not inlined: once per (tile, Gaussian); inlined, it cost 3 s more compilation per dtype
-def _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc):
+def _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th):
     """spans[s0:s0 + 4] = first and last row of the left and the right half of the tile that a
-    Gaussian can reach (first > last: none): `row_range` once, `col_bound` for the halves it can
-    reach at all, then `tight_rows` within each half."""
+    Gaussian can reach (first > last: none): `row_range` once, for the halves `col_bound` leaves."""
     for k in range(2):
         spans[s0 + 2 * k] = 1
         spans[s0 + 2 * k + 1] = 0
@@ -134,10 +133,8 @@ def _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc):
         twh = min(HALF, tw - x0)
         if twh <= 0 or k_hi < x0 or k_lo > x0 + twh - 1:
             continue
-        h_lo, h_hi = tight_rows(r_lo, r_hi, my, mx, a, b, c, thr, xa + x0, ya, twh, pyc)
-        if h_hi >= h_lo:
-            spans[s0 + 2 * h] = h_lo
-            spans[s0 + 2 * h + 1] = h_hi
+        spans[s0 + 2 * h] = r_lo
+        spans[s0 + 2 * h + 1] = r_hi
 
 
 @njit(parallel=True, **_OPTS)
@@ -151,9 +148,9 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
     sign is the "done" flag); a tile stops when all its pixels are done. Writes out (H,W,C)
     channel sums, t_out (H,W) final transmittance (working dtype), t64_out (H,W) the same in
     float64, last_out (H,W) = 1 + tile-list position of the last contributing Gaussian and spans
-    (4 x pairs, int8) the first and last row of each half of each pair it visited (first > last:
-    none), for the backward. Each of the n_workers prange iterations takes tiles from `queue`
-    through `counter` (gsbench/render/cpu_sched.py) until none is left.
+    (4 x pairs, int8), for the backward, the first and last row of the blocks of each half where
+    each pair it visited contributed (first > last: none). Each of the n_workers prange iterations
+    takes tiles from `queue` through `counter` (gsbench/render/cpu_sched.py) until none is left.
     """
     height, width, n_ch = out.shape
     n_tiles = tile_off.size - 1
@@ -195,7 +192,7 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
                 thr = gp[g, THR]
                 jp1 = np.float64(j + 1)
                 s0 = 4 * (start + j)
-                _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc)
+                _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th)
                 for h in range(2):
                     r_lo = np.int64(spans[s0 + 2 * h])
                     r_hi = np.int64(spans[s0 + 2 * h + 1])
@@ -229,6 +226,10 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
                         if n_con > 0:
                             c_lo = min(c_lo, blk)
                             c_hi = blk
+                    # what the backward walks: the blocks where this pair contributes (the same as those
+                    # where the backward finds a contributing pixel, so the walk it saves is all empty)
+                    spans[s0 + 2 * h] = 2 * c_lo if c_hi >= c_lo else 1
+                    spans[s0 + 2 * h + 1] = 2 * c_hi + 1 if c_hi >= c_lo else 0
                     p0 = hb + np.uint64(c_lo * BLK)
                     p1 = hb + np.uint64((c_hi + 1) * BLK)
                     for k in range(n_ch if c_hi >= c_lo else 0):

@@ -12,11 +12,11 @@ from gsbench.render.cpu_kernels import HALF, _half_rows
 
 
 @njit(cache=False)
-def _bounds(g, xa, ya, tw, th, pyc, spans):
+def _bounds(g, xa, ya, tw, th, spans):
     my, mx, a, b, c, thr = g[0], g[1], g[2], g[3], g[4], g[5]
     r = row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
     k = col_bound(my, mx, a, b, c, thr, xa, ya, tw, th)
-    _half_rows(spans, 0, my, mx, a, b, c, thr, xa, ya, tw, th, pyc)
+    _half_rows(spans, 0, my, mx, a, b, c, thr, xa, ya, tw, th)
     return r[0], r[1], k[0], k[1]
 
 
@@ -51,7 +51,7 @@ def test_bounds_hold_every_pixel_that_reaches_thr(dtype, tw, th):
         dy = pyc[ya:ya + th][:, None] - my
         power = dtype(-0.5) * (a * dx * dx + c * dy * dy) - b * dx * dy     # as the kernels compute it
         hit = power >= thr
-        r_lo, r_hi, k_lo, k_hi = _bounds(g, xa, ya, tw, th, pyc, spans)
+        r_lo, r_hi, k_lo, k_hi = _bounds(g, xa, ya, tw, th, spans)
         rows, cols = np.nonzero(hit)
         reached += rows.size > 0
         assert np.all((rows >= r_lo) & (rows <= r_hi)), "row_range misses a pixel"
