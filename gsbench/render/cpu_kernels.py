@@ -118,23 +118,22 @@ def _pixel_centres(pxw, pxc, pyc, xa, ya, height):
 
 
 @njit(**_OPTS)      # not inlined: once per (tile, Gaussian); inlined, it cost 3 s more compilation per dtype
-def _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th):
-    """spans[s0:s0 + 4] = first and last row of the left and the right half of the tile that a
-    Gaussian can reach (first > last: none): `row_range` once, for the halves `col_bound` leaves."""
-    for k in range(2):
-        spans[s0 + 2 * k] = 1
-        spans[s0 + 2 * k + 1] = 0
+def _half_rows(my, mx, a, b, c, thr, xa, ya, tw, th):
+    """(first, last) row of the left and of the right half of the tile that a Gaussian can reach
+    (first > last: none), as a 4-tuple: `row_range` once, for the halves `col_bound` leaves."""
     r_lo, r_hi = row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
     if r_hi < r_lo:
-        return
+        return 1, 0, 1, 0
     k_lo, k_hi = col_bound(my, mx, a, b, c, thr, xa, ya, tw, th)
-    for h in range(2):
-        x0 = h * HALF
-        twh = min(HALF, tw - x0)
-        if twh <= 0 or k_hi < x0 or k_lo > x0 + twh - 1:
-            continue
-        spans[s0 + 2 * h] = r_lo
-        spans[s0 + 2 * h + 1] = r_hi
+    left = not (k_hi < 0 or k_lo > min(HALF, tw) - 1)                     # columns 0..min(HALF, tw) - 1
+    right = tw > HALF and not (k_hi < HALF or k_lo > min(2 * HALF, tw) - 1)  # columns HALF..tw - 1
+    return (r_lo if left else 1, r_hi if left else 0, r_lo if right else 1, r_hi if right else 0)
+
+
+@njit(inline="always", **_OPTS)
+def _params(gp, g):
+    """Gaussian g's centre (x, y), conic (a, b, c), opacity and THR from `gp`."""
+    return gp[g, MX], gp[g, MY], gp[g, CA], gp[g, CB], gp[g, CC], gp[g, OP], gp[g, THR]
 
 
 @njit(parallel=True, **_OPTS)
@@ -183,19 +182,15 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
             n = tile_off[t + 1] - start
             for j in range(n):
                 g = ranks[start + j]
-                mx = gp[g, MX]
-                my = gp[g, MY]
-                a = gp[g, CA]
-                b = gp[g, CB]
-                c = gp[g, CC]
-                op = gp[g, OP]
-                thr = gp[g, THR]
+                mx, my, a, b, c, op, thr = _params(gp, g)
                 jp1 = np.float64(j + 1)
                 s0 = 4 * (start + j)
-                _half_rows(spans, s0, my, mx, a, b, c, thr, xa, ya, tw, th)
+                reach = _half_rows(my, mx, a, b, c, thr, xa, ya, tw, th)
                 for h in range(2):
-                    r_lo = np.int64(spans[s0 + 2 * h])
-                    r_hi = np.int64(spans[s0 + 2 * h + 1])
+                    r_lo = np.int64(reach[2 * h])
+                    r_hi = np.int64(reach[2 * h + 1])
+                    spans[s0 + 2 * h] = 1                  # until the walk below finds a contribution
+                    spans[s0 + 2 * h + 1] = 0
                     if r_hi < r_lo:
                         continue
                     hb = np.uint64(h * HPIX)
@@ -228,8 +223,9 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
                             c_hi = blk
                     # what the backward walks: the blocks where this pair contributes (the same as those
                     # where the backward finds a contributing pixel, so the walk it saves is all empty)
-                    spans[s0 + 2 * h] = 2 * c_lo if c_hi >= c_lo else 1
-                    spans[s0 + 2 * h + 1] = 2 * c_hi + 1 if c_hi >= c_lo else 0
+                    if c_hi >= c_lo:
+                        spans[s0 + 2 * h] = 2 * c_lo
+                        spans[s0 + 2 * h + 1] = 2 * c_hi + 1
                     p0 = hb + np.uint64(c_lo * BLK)
                     p1 = hb + np.uint64((c_hi + 1) * BLK)
                     for k in range(n_ch if c_hi >= c_lo else 0):
@@ -375,13 +371,7 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
                     rows[r0 + j, k] = 0.0
             for j in range(j_top - 1, -1, -1):
                 g = ranks[start + j]
-                mx = gp[g, MX]
-                my = gp[g, MY]
-                a = gp[g, CA]
-                b = gp[g, CB]
-                c = gp[g, CC]
-                op = gp[g, OP]
-                thr = gp[g, THR]
+                mx, my, a, b, c, op, thr = _params(gp, g)
                 a64 = np.float64(a)
                 b64 = np.float64(b)
                 c64 = np.float64(c)
@@ -395,11 +385,10 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
                     if r_hi < r_lo:
                         continue
                     hb = np.uint64(h * HPIX)
-                    u_lo = ROW                                  # first and last block with a contributing pixel
-                    u_hi = -1
+                    # the recorded blocks are those where the pair contributes: the first and the last
+                    # hold a contributing pixel, so the passes below sum over exactly them
                     for blk in range(r_lo // 2, r_hi // 2 + 1):
                         rb = hb + np.uint64(blk * BLK)
-                        n_v = 0
                         for i in range(np.uint64(0), np.uint64(BLK)):
                             p = rb + i
                             dx = pxw[UW_X + p] - mx
@@ -417,15 +406,10 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
                             lb[UL_OM + p] = om if v else 1.0
                             lb[UL_W + p] = al64 * trn if v else 0.0
                             lb[UL_G + p] = np.float64(G)
-                            n_v += v
-                        if n_v > 0:
-                            u_lo = min(u_lo, blk)
-                            u_hi = blk
-                    if u_hi >= u_lo:
-                        p0 = hb + np.uint64(u_lo * BLK)
-                        p1 = hb + np.uint64((u_hi + 1) * BLK)
-                        _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1)
-                        _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
+                    p0 = hb + np.uint64((r_lo // 2) * BLK)
+                    p1 = hb + np.uint64((r_hi // 2 + 1) * BLK)
+                    _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1)
+                    _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
                 for k in range(n_cols):
                     rows[r0 + j, k] = acc[k]
 

@@ -16,7 +16,9 @@ def _bounds(g, xa, ya, tw, th, spans):
     my, mx, a, b, c, thr = g[0], g[1], g[2], g[3], g[4], g[5]
     r = row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
     k = col_bound(my, mx, a, b, c, thr, xa, ya, tw, th)
-    _half_rows(spans, 0, my, mx, a, b, c, thr, xa, ya, tw, th)
+    rows = _half_rows(my, mx, a, b, c, thr, xa, ya, tw, th)
+    for i in range(4):
+        spans[i] = rows[i]
     return r[0], r[1], k[0], k[1]
 
 
