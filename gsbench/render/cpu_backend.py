@@ -62,7 +62,7 @@ import torch
 from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
 from gsbench.phases import timed
-from gsbench.render import cpu_binning, cpu_sched, rules
+from gsbench.render import cpu_binning, cpu_bounds, cpu_sched, rules
 from gsbench.render import cpu_kernels as K
 from gsbench.render import cpu_projection as P
 from gsbench.render.projection import Projected, camera_tensors
@@ -179,7 +179,9 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
     t64 = np.empty((height, width), dtype=np.float64)
     last = np.empty((height, width), dtype=np.int32)
     spans = np.empty(4 * int(tile_off[-1]), dtype=np.int8)
-    K.raster_forward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
+    boxes = np.empty((m, cpu_bounds.NBOX), dtype=np.float64)
+    K.gaussian_boxes(gp, boxes)
+    K.raster_forward(gp, boxes, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
                      out, t_out, t64, last, spans, cpu_sched.tile_queue(tile_off), np.zeros(1, np.int64),
                      set_numba_threads())
     state = (gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order, spans)

@@ -1,8 +1,20 @@
-"""Rigorous bounds of where a Gaussian can pass the `cpu` rasterizer's skip test in a tile.
+"""Rigorous bounds of where a Gaussian can pass the `cpu` rasterizer's skip test.
 
-A pixel is skipped when its computed exponent is below the Gaussian's THR (gsbench/render/cpu_kernels.py);
-these bounds say which rows and columns of a tile can hold a pixel that is not, with margins for the
-rounding of the working dtype, so walking only them gives exactly the result of walking the whole tile.
+A pixel is skipped when its computed exponent is below the Gaussian's THR (gsbench/render/cpu_kernels.py).
+`box` gives, once per Gaussian and render, the half-widths of a box around the Gaussian's centre
+outside which no pixel's computed exponent reaches THR; `tile_rows` turns the box into the rows and
+columns of one tile. Walking only those gives exactly the result of walking the whole tile.
+
+Why the box holds. With d = (dx, dy) from the centre, the exact exponent is -Q/2, Q = a dx^2 + 2 b dx dy
++ c dy^2 (the conic [[a, b], [b, c]]). The kernels compute it in the working dtype from dx and dy
+rounded to it, ten roundings in all, each relative to its own term, so it lies within 1e-5 Q_abs of
+-Q/2, Q_abs = a dx^2 + c dy^2 + 2 |b dx dy| (the bound is about 3 * 2^-24 Q_abs in float32: a 50x
+margin). For a positive definite conic, Q_abs <= kappa Q with kappa = (sqrt(ac) + |b|)^2 / (ac - b^2)
+(|2 b dx dy| <= rho (a dx^2 + c dy^2), rho = |b| / sqrt(ac)). So a pixel that reaches THR has
+Q <= Qmax = -2 THR / (1 - 2e-5 kappa), and over the ellipse Q <= Qmax, |dx| <= sqrt(Qmax c / det) and
+|dy| <= sqrt(Qmax a / det), det = ac - b^2. In float64, det has a relative error below 1e-15 kappa
+(none from the products when the working dtype is float32); that and the other float64 roundings
+are covered by the relative 1e-6 and the absolute 1e-3 pixels.
 """
 from __future__ import annotations
 
@@ -10,6 +22,35 @@ import numpy as np
 from numba import njit
 
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
+
+E_CX, E_CY, E_HX, E_HY = 0, 1, 2, 3      # a box: centre - 0.5 (x, y), half-widths (x, y); float64
+NBOX = 4
+
+
+@njit(inline="always", **_OPTS)
+def box(mx, my, a, b, c, thr):
+    """(x - 0.5, y - 0.5, hx, hy) in float64 of a Gaussian (centre, conic, THR in the working dtype):
+    its centre in pixel-index units (pixel i's centre is i + 0.5) and the half-widths, in pixels, of
+    the box outside which its computed exponent cannot reach THR. hx = hy = -1: no pixel can (THR > 0
+    or NaN, a non-finite centre); inf: no bound (a conic that is not positive definite, or too
+    elongated for the rounding argument, kappa >= 50,000)."""
+    x = np.float64(mx)
+    y = np.float64(my)
+    a = np.float64(a)
+    b = np.float64(b)
+    c = np.float64(c)
+    t = np.float64(thr)
+    if not (t <= 0.0 and np.isfinite(x) and np.isfinite(y)):
+        return 0.0, 0.0, -1.0, -1.0            # a finite centre: no NaN reaches the float -> int conversion
+    det = a * c - b * b
+    if a > 0.0 and c > 0.0 and det > 0.0 and np.isfinite(det):
+        s = np.sqrt(a * c) + abs(b)
+        shrink = 1.0 - 2e-5 * (s * s / det)
+        if shrink > 0.0:
+            qmax = -2.0 * t / shrink
+            return (x - 0.5, y - 0.5, np.sqrt(qmax * c / det) * 1.000001 + 1e-3,
+                    np.sqrt(qmax * a / det) * 1.000001 + 1e-3)
+    return x - 0.5, y - 0.5, np.inf, np.inf
 
 
 @njit(inline="always", **_OPTS)
@@ -22,55 +63,9 @@ def _span(centre, half, n):
 
 
 @njit(inline="always", **_OPTS)
-def _allowance(my, mx, a, b, c, xa, ya, tw, th):
-    """An upper bound, over the tile, of how far the exponent computed in the working dtype can lie
-    from the exact quadratic -(a dx^2 + 2 b dx dy + c dy^2) / 2 (float64): 1e-5 (|a| dx^2 + |c| dy^2 +
-    2 |b dx dy|) at the tile's farthest column and row, widened by one pixel for the rounding of dx
-    and dy; 30x the float32 rounding bound of the five operations."""
-    a64 = np.float64(a)
-    b64 = np.float64(b)
-    c64 = np.float64(c)
-    dxm = max(abs(xa + 0.5 - np.float64(mx)), abs(xa + tw - 0.5 - np.float64(mx))) + 1.0
-    dym = max(abs(ya + 0.5 - np.float64(my)), abs(ya + th - 0.5 - np.float64(my))) + 1.0
-    return 1e-5 * (abs(a64) * dxm * dxm + abs(c64) * dym * dym + 2.0 * abs(b64) * dxm * dym)
-
-
-@njit(inline="always", **_OPTS)
-def _axis_range(m, own, other, b, thr, err, start, n):
-    """Indices [lo, hi] of 0..n-1 along one axis (start: the tile's first pixel on it, m: the
-    Gaussian's centre on it) where the computed exponent can reach `thr`, for the conic's coefficient
-    `own` of this axis and `other` of the other one. Along a line of constant d on this axis the exact
-    exponent peaks at -d^2 (own - b^2 / other) / 2, and the computed one exceeds the exact one by less
-    than `err`, so every index outside |d| <= sqrt(2 (err - thr) / (own - b^2 / other)) (widened by
-    one for the rounding of d) is below thr everywhere."""
-    b64 = np.float64(b)
-    other64 = np.float64(other)
-    if not (other64 > 0.0):
-        return 0, n - 1
-    q = np.float64(own) - b64 * b64 / other64
-    if not (q > 0.0):
-        return 0, n - 1
-    room = (err - np.float64(thr)) * 1.000001 + 1e-9 * abs(np.float64(thr)) + 1e-30
-    if not (room >= 0.0):
-        return 1, 0
-    half = np.sqrt(2.0 * room / q) * 1.000001 + 1.0
-    return _span(np.float64(m) - 0.5 - start, half, n)     # centre: where d = 0
-
-
-@njit(inline="always", **_OPTS)
-def row_range(my, mx, a, b, c, thr, xa, ya, tw, th):
-    """Rows [r_lo, r_hi] of a tile where the computed exponent can reach `thr` (r_lo > r_hi: none):
-    over a row the exact exponent peaks at -dy^2 (c - b^2 / a) / 2, so every row outside
-    |dy| <= sqrt(2 (allowance - thr) / (c - b^2 / a)) (`_allowance`; widened by one row for the
-    rounding of dy) is below thr in every column. One square root per (tile, Gaussian).
-    """
-    return _axis_range(my, c, a, b, thr, _allowance(my, mx, a, b, c, xa, ya, tw, th), ya, th)
-
-
-@njit(inline="always", **_OPTS)
-def col_bound(my, mx, a, b, c, thr, xa, ya, tw, th):
-    """Columns [i_lo, i_hi] of a tile where the computed exponent can reach `thr` in some row (i_lo >
-    i_hi: none): `row_range` with the axes swapped, so the halves of a tile a Gaussian cannot reach
-    are skipped. One square root per (tile, Gaussian).
-    """
-    return _axis_range(mx, a, c, b, thr, _allowance(my, mx, a, b, c, xa, ya, tw, th), xa, tw)
+def tile_rows(boxes, g, xa, ya, tw, th):
+    """(r_lo, r_hi, k_lo, k_hi): the rows and columns of the tile at (xa, ya) of tw x th pixels that
+    row g of `boxes` (one `box` per row, (M, NBOX) float64) meets (lo > hi: none)."""
+    r_lo, r_hi = _span(boxes[g, E_CY] - ya, boxes[g, E_HY], th)
+    k_lo, k_hi = _span(boxes[g, E_CX] - xa, boxes[g, E_HX], tw)
+    return r_lo, r_hi, k_lo, k_hi

@@ -32,8 +32,9 @@ How the work is laid out (the speed comes from SIMD over the pixels of a tile):
   halves (HALF = 8 columns) one after the other, each row-major (`_pix`): 16 consecutive entries
   are two consecutive half rows, a block (BLK lanes, the unit of work);
 - per tile, Gaussians outer (front to back in the forward, back to front in the backward); per
-  Gaussian only the halves and rows of the tile it can reach (gsbench/render/cpu_bounds.py,
-  `_half_rows`): `row_range` and `col_bound`, rigorous bounds on where the exponent can reach THR.
+  Gaussian only the halves and rows of the tile it can reach (`_half_rows`): those its box meets,
+  a rigorous bound on where the exponent can reach THR computed once per Gaussian and render
+  (`gaussian_boxes`; the bound is gsbench/render/cpu_bounds.py's).
   The forward records in `spans`, per (tile, Gaussian) pair and half, the blocks where the pair
   contributed; the backward walks only those (a pixel contributes in the backward exactly when it
   did in the forward, so the blocks it skips hold no contribution). A Gaussian a few pixels wide
@@ -46,7 +47,10 @@ How the work is laid out (the speed comes from SIMD over the pixels of a tile):
   from the stored final float64 transmittance and the index of the last contributing Gaussian. It
   computes every pixel's terms of one Gaussian in a lane pass (only what the next passes read),
   then its channel and geometry gradients in two passes (`_bwd_channels`, `_bwd_geometry`) that sum
-  over the pixels in float64. Those two are compiled with reassociation so that the sums vectorise:
+  over the pixels in float64. d alpha needs the colour behind the Gaussian only through its dot
+  product with d loss / d channel, so a pixel carries that one number (u <- alpha q + (1 - alpha) u,
+  q = the Gaussian's channels . d loss / d channel) instead of every channel of the colour behind:
+  per channel, a pass reads d loss / d channel and the weight and writes nothing per pixel. Those two are compiled with reassociation so that the sums vectorise:
   their rounding depends on the compiled code's vector width, not on the thread count. Each
   (tile, Gaussian) gets one gradient row in the working dtype; `reduce_rows` adds the rows into the
   per-Gaussian gradients serially in row order (tile index, then depth rank). So results are
@@ -57,7 +61,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from gsbench.render.cpu_bounds import col_bound, row_range
+from gsbench.render.cpu_bounds import E_CX, E_CY, E_HX, E_HY, box, tile_rows
 from gsbench.render.cpu_exp import _expw, _like
 from gsbench.render.cpu_sched import fetch_add
 
@@ -76,7 +80,7 @@ MAXPIX = ROW * ROW              # per-pixel state of a tile: pixel (row, col) at
 UMAXPIX = np.uint64(MAXPIX)
 # backward per-pixel arrays, MAXPIX apart: `px` (X_*: transmittance, g_T * T_final, last + 1), `pxw`
 # (the pixel centre's x and y, working dtype) and `lb`, the current Gaussian's terms per pixel (L_*:
-# alpha (0 where the pair does not contribute), 1 - alpha, weight, d alpha's channel part, G)
+# alpha (0 where the pair does not contribute), 1 - alpha, weight, q (`_bwd_channels`), G)
 X_TR, X_TG, X_LAST = 0, 1, 2
 UX_TR, UX_TG, UX_LAST = (np.uint64(k * MAXPIX) for k in (X_TR, X_TG, X_LAST))
 UW_X, UW_Y = np.uint64(0), np.uint64(MAXPIX)
@@ -117,14 +121,25 @@ def _pixel_centres(pxw, pxc, pyc, xa, ya, height):
             pxw[MAXPIX + p] = pyc[min(ya + r, height - 1)]
 
 
-@njit(**_OPTS)      # not inlined: once per (tile, Gaussian); inlined, it cost 3 s more compilation per dtype
-def _half_rows(my, mx, a, b, c, thr, xa, ya, tw, th):
-    """(first, last) row of the left and of the right half of the tile that a Gaussian can reach
-    (first > last: none), as a 4-tuple: `row_range` once, for the halves `col_bound` leaves."""
-    r_lo, r_hi = row_range(my, mx, a, b, c, thr, xa, ya, tw, th)
-    if r_hi < r_lo:
+@njit(**_OPTS)
+def gaussian_boxes(gp, boxes):
+    """boxes[g] = `box` of row g of gp ((M, NBOX) float64): once per render, for the forward's
+    `_half_rows`."""
+    for g in range(gp.shape[0]):
+        cx, cy, hx, hy = box(gp[g, MX], gp[g, MY], gp[g, CA], gp[g, CB], gp[g, CC], gp[g, THR])
+        boxes[g, E_CX] = cx
+        boxes[g, E_CY] = cy
+        boxes[g, E_HX] = hx
+        boxes[g, E_HY] = hy
+
+
+@njit(inline="always", **_OPTS)
+def _half_rows(boxes, g, xa, ya, tw, th):
+    """(first, last) row of the left and of the right half of the tile that Gaussian g can reach
+    (first > last: none), as a 4-tuple: the rows its box meets, for the halves its columns meet."""
+    r_lo, r_hi, k_lo, k_hi = tile_rows(boxes, g, xa, ya, tw, th)
+    if r_hi < r_lo or k_hi < k_lo:
         return 1, 0, 1, 0
-    k_lo, k_hi = col_bound(my, mx, a, b, c, thr, xa, ya, tw, th)
     left = not (k_hi < 0 or k_lo > min(HALF, tw) - 1)                     # columns 0..min(HALF, tw) - 1
     right = tw > HALF and not (k_hi < HALF or k_lo > min(2 * HALF, tw) - 1)  # columns HALF..tw - 1
     return (r_lo if left else 1, r_hi if left else 0, r_lo if right else 1, r_hi if right else 0)
@@ -137,12 +152,12 @@ def _params(gp, g):
 
 
 @njit(parallel=True, **_OPTS)
-def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
+def raster_forward(gp, boxes, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
                    out, t_out, t64_out, last_out, spans, queue, counter, n_workers):
     """Fused forward: all channels of every pixel, one tile per task.
 
-    Gaussians are visited front to back, each over the half rows it can reach (`_half_rows`):
-    first the exponent, alpha, transmittance and weight of every lane of each half row, then one
+    Gaussians are visited front to back, each over the half rows it can reach (`_half_rows` of
+    `boxes`, from `gaussian_boxes`): first the exponent, alpha, transmittance and weight of every lane of each half row, then one
     loop per channel over those half rows. A finished pixel keeps its transmittance negated (the
     sign is the "done" flag); a tile stops when all its pixels are done. Writes out (H,W,C)
     channel sums, t_out (H,W) final transmittance (working dtype), t64_out (H,W) the same in
@@ -185,7 +200,7 @@ def raster_forward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts
                 mx, my, a, b, c, op, thr = _params(gp, g)
                 jp1 = np.float64(j + 1)
                 s0 = 4 * (start + j)
-                reach = _half_rows(my, mx, a, b, c, thr, xa, ya, tw, th)
+                reach = _half_rows(boxes, g, xa, ya, tw, th)
                 for h in range(2):
                     r_lo = np.int64(reach[2 * h])
                     r_hi = np.int64(reach[2 * h + 1])
@@ -254,34 +269,52 @@ _SUM_OPTS = dict(_OPTS, fastmath={"reassoc", "nsz"})
 
 
 @njit(**_SUM_OPTS)
-def _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1):
-    """Channel pass of one Gaussian over the pixels [p0, p1) of its rows: the colour behind each
-    pixel, d alpha's channel terms and the channel gradients (sums over the pixels).
+def _bwd_channels(lb, gb, ch, g, acc, n_ch, p0, p1):
+    """Channel pass of one Gaussian over the pixels [p0, p1) of its rows: the channel gradients
+    (sums over the pixels of weight x d loss / d channel) and, per pixel, q = sum_k d loss / d
+    channel_k x channel_k of the Gaussian (in the L_DA lane), two channels per loop.
 
     The only function besides `_bwd_geometry` compiled with reassociation, so that its sums over
     pixels vectorise: their float64 rounding depends on the vector width of the compiled code
     (fixed for a given machine and numba cache, whatever the thread count), not on pixel order.
+    Pixels that do not contribute have weight 0 (their q is not read).
     """
-    for p in range(p0, p1):
-        lb[UL_DA + p] = 0.0
-    for k in range(n_ch):
-        cv = np.float64(ch[g, k])
-        kb = np.uint64(k * MAXPIX)
+    k0 = n_ch % 2
+    if k0 == 1:
+        cv = np.float64(ch[g, 0])
         sk = 0.0
         for p in range(p0, p1):
-            vv = lb[UL_AL + p] != 0.0
-            gc = gb[kb + p]
-            sv = sb[kb + p]
-            sk += lb[UL_W + p] * gc if vv else 0.0
-            lb[UL_DA + p] += gc * (cv - sv) if vv else 0.0
-            sb[kb + p] = lb[UL_AL + p] * cv + lb[UL_OM + p] * sv if vv else sv
-        acc[G_CH + k] += sk
+            gc = gb[p]
+            sk += lb[UL_W + p] * gc
+            lb[UL_DA + p] = gc * cv
+        acc[G_CH] += sk
+    else:
+        for p in range(p0, p1):
+            lb[UL_DA + p] = 0.0
+    for k in range(k0, n_ch, 2):
+        cv0 = np.float64(ch[g, k])
+        cv1 = np.float64(ch[g, k + 1])
+        kb0 = np.uint64(k * MAXPIX)
+        kb1 = np.uint64((k + 1) * MAXPIX)
+        s0 = 0.0
+        s1 = 0.0
+        for p in range(p0, p1):
+            w = lb[UL_W + p]
+            g0 = gb[kb0 + p]
+            g1 = gb[kb1 + p]
+            s0 += w * g0
+            s1 += w * g1
+            lb[UL_DA + p] += g0 * cv0 + g1 * cv1
+        acc[G_CH + k] += s0
+        acc[G_CH + k + 1] += s1
 
 
 @njit(**_SUM_OPTS)
-def _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1):
-    """Geometry pass of one Gaussian over the pixels [p0, p1): d alpha, then the sums of the
-    opacity, mean and conic gradients (lanes outside the clamp or not contributing add 0)."""
+def _bwd_geometry(lb, ub, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1):
+    """Geometry pass of one Gaussian over the pixels [p0, p1): d alpha = (q - u) T - g_T T_final /
+    (1 - alpha), with u = sum_k d loss / d channel_k x (the colour behind the Gaussian)_k, then the
+    sums of the opacity, mean and conic gradients (lanes outside the clamp or not contributing add
+    0); u moves in front of the Gaussian (u <- alpha q + (1 - alpha) u where it contributes)."""
     s_op = 0.0
     s_mx = 0.0
     s_my = 0.0
@@ -289,10 +322,14 @@ def _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1):
     s_cb = 0.0
     s_cc = 0.0
     for p in range(p0, p1):
+        vv = lb[UL_AL + p] != 0.0                       # contributes
+        q = lb[UL_DA + p]
+        u = ub[p]
+        ub[p] = lb[UL_AL + p] * q + lb[UL_OM + p] * u if vv else u
         G = _like(lb[UL_G + p], op)
         raw = op * G
-        cl = (lb[UL_AL + p] != 0.0) & (raw <= amax)     # contributes, and inside the alpha clamp
-        d_alpha = lb[UL_DA + p] * px[UX_TR + p] - px[UX_TG + p] / lb[UL_OM + p]
+        cl = vv & (raw <= amax)                          # contributes, and inside the alpha clamp
+        d_alpha = (q - u) * px[UX_TR + p] - px[UX_TG + p] / lb[UL_OM + p]
         d_pow = d_alpha * np.float64(raw)
         dx64 = np.float64(pxw[UW_X + p] - mx)
         dy64 = np.float64(pxw[UW_Y + p] - my)
@@ -318,7 +355,8 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
     in the dtype of `rows`.
 
     Gaussians are visited back to front; every pixel carries its transmittance (recovered as
-    T_j = T_{j+1} / (1 - alpha_j) from the stored final value) and the colour behind it. Per
+    T_j = T_{j+1} / (1 - alpha_j) from the stored final value) and u, the colour behind it dotted
+    with d loss / d channel (`_bwd_geometry`). Per
     Gaussian, three branch-free passes over the pixels of the rows the forward recorded in `spans`
     (vectorised like the forward): the lane pass (alpha, transmittance, weight, G), then
     `_bwd_channels` and `_bwd_geometry`. Pixels that do not contribute add exact zeros. Workers
@@ -347,7 +385,7 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
             th = n_pix // tw
             px = np.zeros(3 * MAXPIX, np.float64)           # per pixel: transmittance, g_T * T_final, last
             lb = np.zeros(NLANE * MAXPIX, np.float64)       # per pixel, current Gaussian: L_* terms
-            sb = np.zeros(n_ch * MAXPIX, np.float64)        # colour behind: channel k of pixel p at k * MAXPIX + p
+            ub = np.zeros(MAXPIX, np.float64)               # per pixel: u, the colour behind . d loss / d channel
             gb = np.zeros(n_ch * MAXPIX, np.float64)        # d loss / d channel, same layout
             acc = np.zeros(n_cols, np.float64)
             pxw = np.empty(2 * MAXPIX, gp.dtype)             # per pixel: its centre's x and y (working dtype)
@@ -408,8 +446,8 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
                             lb[UL_G + p] = np.float64(G)
                     p0 = hb + np.uint64((r_lo // 2) * BLK)
                     p1 = hb + np.uint64((r_hi // 2 + 1) * BLK)
-                    _bwd_channels(lb, sb, gb, ch, g, acc, n_ch, p0, p1)
-                    _bwd_geometry(lb, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
+                    _bwd_channels(lb, gb, ch, g, acc, n_ch, p0, p1)
+                    _bwd_geometry(lb, ub, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
                 for k in range(n_cols):
                     rows[r0 + j, k] = acc[k]
 
