@@ -50,11 +50,11 @@ How the work is laid out (the speed comes from SIMD over the pixels of a tile):
   over the pixels in float64. d alpha needs the colour behind the Gaussian only through its dot
   product with d loss / d channel, so a pixel carries that one number (u <- alpha q + (1 - alpha) u,
   q = the Gaussian's channels . d loss / d channel) instead of every channel of the colour behind:
-  per channel, a pass reads d loss / d channel and the weight and writes nothing per pixel. Those two are compiled with reassociation so that the sums vectorise:
-  their rounding depends on the compiled code's vector width, not on the thread count. Each
-  (tile, Gaussian) gets one gradient row in the working dtype; `reduce_rows` adds the rows into the
-  per-Gaussian gradients serially in row order (tile index, then depth rank). So results are
-  bit-identical for any thread count.
+  per channel, a pass reads d loss / d channel and the weight and writes nothing per pixel. Those
+  two are compiled with reassociation so that the sums vectorise: their rounding depends on the
+  compiled code's vector width, not on the thread count. Each (tile, Gaussian) gets one gradient
+  row in the working dtype; `reduce_rows` adds the rows into the per-Gaussian gradients serially
+  in row order (tile index, then depth rank). So results are bit-identical for any thread count.
 """
 from __future__ import annotations
 
@@ -157,14 +157,15 @@ def raster_forward(gp, boxes, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size,
     """Fused forward: all channels of every pixel, one tile per task.
 
     Gaussians are visited front to back, each over the half rows it can reach (`_half_rows` of
-    `boxes`, from `gaussian_boxes`): first the exponent, alpha, transmittance and weight of every lane of each half row, then one
-    loop per channel over those half rows. A finished pixel keeps its transmittance negated (the
-    sign is the "done" flag); a tile stops when all its pixels are done. Writes out (H,W,C)
-    channel sums, t_out (H,W) final transmittance (working dtype), t64_out (H,W) the same in
-    float64, last_out (H,W) = 1 + tile-list position of the last contributing Gaussian and spans
-    (4 x pairs, int8), for the backward, the first and last row of the blocks of each half where
-    each pair it visited contributed (first > last: none). Each of the n_workers prange iterations
-    takes tiles from `queue` through `counter` (gsbench/render/cpu_sched.py) until none is left.
+    `boxes`, from `gaussian_boxes`): first the exponent, alpha, transmittance and weight of every
+    lane of each half row, then one loop per channel over those half rows. A finished pixel keeps
+    its transmittance negated (the sign is the "done" flag); a tile stops when all its pixels are
+    done. Writes out (H,W,C) channel sums, t_out (H,W) final transmittance (working dtype), t64_out
+    (H,W) the same in float64, last_out (H,W) = 1 + tile-list position of the last contributing
+    Gaussian and spans (4 x pairs, int8), for the backward, the first and last row of the blocks of
+    each half where each pair it visited contributed (first > last: none). Each of the n_workers
+    prange iterations takes tiles from `queue` through `counter` (gsbench/render/cpu_sched.py) until
+    none is left.
     """
     height, width, n_ch = out.shape
     n_tiles = tile_off.size - 1
