@@ -189,10 +189,14 @@ def select_level(blended: Sequence[np.ndarray]) -> int:
 def lerf_localization(relevancy_levels: Any, bboxes: Any, size: int = LERF_BLEND_KERNEL) -> bool:
     """True when an argmax pixel of mean30x30(r) (best level) lies in any box [x1, y1, x2, y2]."""
     maps = _levels(relevancy_levels, "relevancy")
+    return _localized([box_mean(m, size) for m in maps], bboxes)
+
+
+def _localized(avg: list[np.ndarray], bboxes: Any) -> bool:
+    """`lerf_localization` from the levels' box means (`box_mean`), computed once by the caller."""
     boxes = finite_float(bboxes, "gt bboxes").reshape(-1, 4)
     if boxes.shape[0] == 0:
         raise InputError("gt bboxes: no box given for localization")
-    avg = [box_mean(m, size) for m in maps]
     lvl = select_level(avg)
     ys, xs = np.nonzero(avg[lvl] == avg[lvl].max())
     for x1, y1, x2, y2 in boxes:
@@ -270,7 +274,9 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
             per_pair.append(entry)
             continue
         maps = _levels(p.relevancy, f"{tag} relevancy")
-        blended = [lerf_blend(m, kernels.blend) for m in maps]
+        # each level's box mean once, for the blend and the localization (`lerf_blend` is 0.5 (r + mean))
+        avg = [box_mean(m, kernels.blend) for m in maps]
+        blended = [0.5 * (m + a) for m, a in zip(maps, avg)]
         lvl = select_level(blended)
         entry = {"frame": p.frame, "query": p.query, "iou": None, "level": lvl, "localized": None}
         gt = None if p.gt_mask is None else as_mask(p.gt_mask, f"{tag} gt_mask")
@@ -286,7 +292,7 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
                 entry["empty_gt"] = True
             ious.append(entry["iou"])
         if has_boxes:
-            entry["localized"] = lerf_localization(maps, p.gt_bboxes, kernels.blend)
+            entry["localized"] = _localized(avg, p.gt_bboxes)
             hits.append(1.0 if entry["localized"] else 0.0)
         per_pair.append(entry)
     return LerfSceneResult(

@@ -10,7 +10,7 @@ front to back, so each tile's list is in compositing order.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
 
@@ -76,37 +76,47 @@ def _tile_range(v0, v1, size, tile_size, n_tiles):
     return lo, hi
 
 
-@njit(**_OPTS)
-def bin_tiles(x0, x1, y0, y1, width, height, tile_size):
+@njit(parallel=True, **_OPTS)
+def bin_tiles(x0, x1, y0, y1, width, height, tile_size, n_workers=1):
     """Per-tile lists of Gaussian ranks (boxes given front to back).
 
     Returns (tile_off (T+1,), ranks (P,)): the Gaussians of tile t are
-    ranks[tile_off[t]:tile_off[t+1]], in depth order.
+    ranks[tile_off[t]:tile_off[t+1]], in depth order. Each of the n_workers prange iterations takes
+    one run of consecutive ranks and writes its entries after those of the runs before it in every
+    tile, so the lists are those of one serial pass whatever the number of workers.
     """
     tiles_x = (width + tile_size - 1) // tile_size
     tiles_y = (height + tile_size - 1) // tile_size
     n_tiles = tiles_x * tiles_y
     m = x0.size
+    n_workers = max(1, min(n_workers, m))
     rng = np.empty((m, 4), np.int64)
+    per = np.zeros((n_workers, n_tiles), np.int64)          # entries of worker w's run in tile t
+    for w in prange(n_workers):
+        for g in range(w * m // n_workers, (w + 1) * m // n_workers):
+            xl, xh = _tile_range(x0[g], x1[g], width, tile_size, tiles_x)
+            yl, yh = _tile_range(y0[g], y1[g], height, tile_size, tiles_y)
+            rng[g, 0] = xl
+            rng[g, 1] = xh
+            rng[g, 2] = yl
+            rng[g, 3] = yh
+            for ty in range(yl, yh + 1):
+                for tx in range(xl, xh + 1):
+                    per[w, ty * tiles_x + tx] += 1
     counts = np.zeros(n_tiles + 1, np.int64)
-    for g in range(m):
-        xl, xh = _tile_range(x0[g], x1[g], width, tile_size, tiles_x)
-        yl, yh = _tile_range(y0[g], y1[g], height, tile_size, tiles_y)
-        rng[g, 0] = xl
-        rng[g, 1] = xh
-        rng[g, 2] = yl
-        rng[g, 3] = yh
-        for ty in range(yl, yh + 1):
-            for tx in range(xl, xh + 1):
-                counts[ty * tiles_x + tx + 1] += 1
+    cursor = np.empty((n_workers, n_tiles), np.int64)     # where worker w writes next in tile t
     for t in range(n_tiles):
-        counts[t + 1] += counts[t]
+        c = counts[t]
+        for w in range(n_workers):
+            cursor[w, t] = c
+            c += per[w, t]
+        counts[t + 1] = c
     ranks = np.empty(counts[n_tiles], np.int32)
-    cursor = counts[:n_tiles].copy()
-    for g in range(m):
-        for ty in range(rng[g, 2], rng[g, 3] + 1):
-            for tx in range(rng[g, 0], rng[g, 1] + 1):
-                t = ty * tiles_x + tx
-                ranks[cursor[t]] = g
-                cursor[t] += 1
+    for w in prange(n_workers):
+        for g in range(w * m // n_workers, (w + 1) * m // n_workers):
+            for ty in range(rng[g, 2], rng[g, 3] + 1):
+                for tx in range(rng[g, 0], rng[g, 1] + 1):
+                    t = ty * tiles_x + tx
+                    ranks[cursor[w, t]] = g
+                    cursor[w, t] += 1
     return counts, ranks
