@@ -79,14 +79,14 @@ BLK = 2 * HALF                  # lanes of a block: two consecutive half rows (t
 MAXPIX = ROW * ROW              # per-pixel state of a tile: pixel (row, col) at _pix(row, col)
 UMAXPIX = np.uint64(MAXPIX)
 # backward per-pixel arrays, MAXPIX apart: `px` (X_*: transmittance, g_T * T_final, last + 1), `pxw`
-# (the pixel centre's x and y, working dtype) and `lb`, the current Gaussian's terms per pixel (L_*:
-# alpha (0 where the pair does not contribute), 1 - alpha, weight, q (`_bwd_channels`), G)
+# (the pixel centre's x and y, working dtype), and the current Gaussian's terms per pixel: `lw` in
+# the working dtype, the values it holds exactly (alpha, 0 where the pair does not contribute;
+# 1 - alpha, 1 there; G), and `lb` in float64 (the weight; q, see `_bwd_channels`)
 X_TR, X_TG, X_LAST = 0, 1, 2
 UX_TR, UX_TG, UX_LAST = (np.uint64(k * MAXPIX) for k in (X_TR, X_TG, X_LAST))
 UW_X, UW_Y = np.uint64(0), np.uint64(MAXPIX)
-L_AL, L_OM, L_W, L_DA, L_G = range(5)
-NLANE = 5
-UL_AL, UL_OM, UL_W, UL_DA, UL_G = (np.uint64(k * MAXPIX) for k in range(NLANE))
+UV_AL, UV_OM, UV_G = (np.uint64(k * MAXPIX) for k in range(3))
+UL_W, UL_DA = np.uint64(0), np.uint64(MAXPIX)
 
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
 
@@ -311,7 +311,7 @@ def _bwd_channels(lb, gb, ch, g, acc, n_ch, p0, p1):
 
 
 @njit(**_SUM_OPTS)
-def _bwd_geometry(lb, ub, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1):
+def _bwd_geometry(lb, lw, ub, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1):
     """Geometry pass of one Gaussian over the pixels [p0, p1): d alpha = (q - u) T - g_T T_final /
     (1 - alpha), with u = sum_k d loss / d channel_k x (the colour behind the Gaussian)_k, then the
     sums of the opacity, mean and conic gradients (lanes outside the clamp or not contributing add
@@ -323,18 +323,20 @@ def _bwd_geometry(lb, ub, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
     s_cb = 0.0
     s_cc = 0.0
     for p in range(p0, p1):
-        vv = lb[UL_AL + p] != 0.0                       # contributes
+        al = np.float64(lw[UV_AL + p])
+        om = np.float64(lw[UV_OM + p])
+        vv = al != 0.0                                  # contributes
         q = lb[UL_DA + p]
         u = ub[p]
-        ub[p] = lb[UL_AL + p] * q + lb[UL_OM + p] * u if vv else u
-        G = _like(lb[UL_G + p], op)
+        ub[p] = al * q + om * u if vv else u
+        G = lw[UV_G + p]
         raw = op * G
         cl = vv & (raw <= amax)                          # contributes, and inside the alpha clamp
-        d_alpha = (q - u) * px[UX_TR + p] - px[UX_TG + p] / lb[UL_OM + p]
+        d_alpha = (q - u) * px[UX_TR + p] - px[UX_TG + p] / om
         d_pow = d_alpha * np.float64(raw)
         dx64 = np.float64(pxw[UW_X + p] - mx)
         dy64 = np.float64(pxw[UW_Y + p] - my)
-        s_op += d_alpha * lb[UL_G + p] if cl else 0.0
+        s_op += d_alpha * np.float64(G) if cl else 0.0
         s_mx += d_pow * (a64 * dx64 + b64 * dy64) if cl else 0.0
         s_my += d_pow * (b64 * dx64 + c64 * dy64) if cl else 0.0
         s_ca += d_pow * (-0.5 * dx64 * dx64) if cl else 0.0
@@ -385,7 +387,8 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
             xa, ya, tw, n_pix = _tile_box(t, tiles_x, tile_size, width, height)
             th = n_pix // tw
             px = np.zeros(3 * MAXPIX, np.float64)           # per pixel: transmittance, g_T * T_final, last
-            lb = np.zeros(NLANE * MAXPIX, np.float64)       # per pixel, current Gaussian: L_* terms
+            lb = np.zeros(2 * MAXPIX, np.float64)           # per pixel, current Gaussian: weight, q
+            lw = np.zeros(3 * MAXPIX, gp.dtype)             # per pixel, current Gaussian: alpha, 1 - alpha, G
             ub = np.zeros(MAXPIX, np.float64)               # per pixel: u, the colour behind . d loss / d channel
             gb = np.zeros(n_ch * MAXPIX, np.float64)        # d loss / d channel, same layout
             acc = np.zeros(n_cols, np.float64)
@@ -441,14 +444,14 @@ def raster_backward(gp, ch, tile_off, ranks, pxc, pyc, tiles_x, tile_size, const
                             tr0 = px[UX_TR + p]
                             trn = tr0 / om                      # transmittance before Gaussian j
                             px[UX_TR + p] = trn if v else tr0
-                            lb[UL_AL + p] = al64 if v else 0.0  # alpha >= ALPHA_MIN > 0 where v: AL != 0 is v
-                            lb[UL_OM + p] = om if v else 1.0
+                            lw[UV_AL + p] = alpha if v else zero   # alpha >= ALPHA_MIN > 0 where v: AL != 0 is v
+                            lw[UV_OM + p] = one - alpha if v else one
+                            lw[UV_G + p] = G
                             lb[UL_W + p] = al64 * trn if v else 0.0
-                            lb[UL_G + p] = np.float64(G)
                     p0 = hb + np.uint64((r_lo // 2) * BLK)
                     p1 = hb + np.uint64((r_hi // 2 + 1) * BLK)
                     _bwd_channels(lb, gb, ch, g, acc, n_ch, p0, p1)
-                    _bwd_geometry(lb, ub, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
+                    _bwd_geometry(lb, lw, ub, px, pxw, acc, a64, b64, c64, op, amax, mx, my, p0, p1)
                 for k in range(n_cols):
                     rows[r0 + j, k] = acc[k]
 
