@@ -278,6 +278,24 @@ def rasterize_cpu(proj: Projected, channels: torch.Tensor, width: int, height: i
 
 
 # ---------------------------------------------------------------------------- fused render
+@numba.njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _camera_points(m, R, t, K, one, pc, uv):
+    """pc = R m + t as ((m0 R0 + m1 R1) + m2 R2) + t and uv = (fx x) / z + cx (z = 0 read as 1), each
+    operation in the working dtype of m, R, t, K and in the reference's order (no FMA: fastmath is
+    off), stored as float64; `one` is 1 in the working dtype. Non-finite or behind-camera points are
+    culled by `project_forward`."""
+    for g in range(m.shape[0]):
+        c0 = ((m[g, 0] * R[0, 0] + m[g, 1] * R[0, 1]) + m[g, 2] * R[0, 2]) + t[0]
+        c1 = ((m[g, 0] * R[1, 0] + m[g, 1] * R[1, 1]) + m[g, 2] * R[1, 2]) + t[1]
+        c2 = ((m[g, 0] * R[2, 0] + m[g, 1] * R[2, 1]) + m[g, 2] * R[2, 2]) + t[2]
+        z = c2 if c2 != 0 else one
+        pc[g, 0] = c0
+        pc[g, 1] = c1
+        pc[g, 2] = c2
+        uv[g, 0] = K[0, 0] * c0 / z + K[0, 2]
+        uv[g, 1] = K[1, 1] * c1 / z + K[1, 2]
+
+
 class _Projection:
     """Result of the numba projection of a whole field (float64), shared by forward and backward."""
 
@@ -292,14 +310,9 @@ class _Projection:
         # order (R m + t as ((m0 R0 + m1 R1) + m2 R2) + t, then (fx x) / z + cx), in numpy rather than
         # PyTorch: serial, so no OpenMP workers are left spinning against the numba kernels.
         R_wc, t_wc, Kt = (a.numpy() for a in camera_tensors(camera, "cpu", dtype))
-        m = field.means.detach().numpy()
-        mc = np.empty((self.n, 3), dtype=self.np_dtype)
-        for r in range(3):
-            mc[:, r] = ((m[:, 0] * R_wc[r, 0] + m[:, 1] * R_wc[r, 1]) + m[:, 2] * R_wc[r, 2]) + t_wc[r]
-        with np.errstate(all="ignore"):     # non-finite / behind-camera points are culled by the kernel
-            zs = np.where(mc[:, 2] != 0, mc[:, 2], self.np_dtype(1.0))
-            uv = np.stack([Kt[0, 0] * mc[:, 0] / zs + Kt[0, 2], Kt[1, 1] * mc[:, 1] / zs + Kt[1, 2]], -1)
-        self.pc = mc.astype(np.float64)
+        self.pc = np.empty((self.n, 3), np.float64)
+        uv = np.empty((self.n, 2), np.float64)
+        _camera_points(_numpy(field.means), R_wc, t_wc, Kt, self.np_dtype(1.0), self.pc, uv)
         w2c = np.asarray(camera.world_to_camera, dtype=np.float64)
         self.cam = P.camera_array(w2c[:3, :3], w2c[:3, 3], np.asarray(camera.K, np.float64),
                                   camera.width, camera.height)
@@ -309,7 +322,7 @@ class _Projection:
         params = np.empty((n, P.NPROJ), np.float64)
         self.radii = np.empty((n, 2), np.int64)
         set_numba_threads()
-        P.project_forward(self.pc, uv.astype(np.float64), self.log_scales, self.quats, self.logits, self.cam,
+        P.project_forward(self.pc, uv, self.log_scales, self.quats, self.logits, self.cam,
                           self.width, self.height, self.np_dtype == np.float32, ok, params, self.radii)
         self.ids = np.flatnonzero(ok)
         self.params = params[self.ids].astype(self.np_dtype)     # (M, NPROJ) working dtype
