@@ -1,5 +1,6 @@
 """The `cpu` backend's one-pass glue against the numpy it replaced: `_pack` (the kernels' inputs in
-depth order) and `_scatter_grads` (the raster's gradient rows to the outputs)."""
+depth order), `_scatter_grads` (the raster's gradient rows to the outputs), `_camera_points` (camera
+points and projected centres), `_deinterleave` and `_interleave` (the channel split and join)."""
 from __future__ import annotations
 
 import numpy as np
@@ -70,3 +71,43 @@ def test_scatter_grads_equals_the_numpy_assignments(dtype, n_feat):
     assert np.array_equal(gr[:, P.P_CA:P.P_CC + 1], full[:, K.G_CA:K.G_CC + 1])
     assert np.array_equal(gr[:, P.P_OP], full[:, K.G_OP])
     assert np.array_equal(gr[:, P.P_Z], full[:, K.G_CH + 3])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_camera_points_equal_the_numpy_operations(dtype):
+    rng = np.random.default_rng(2)
+    n = 4000
+    m = (rng.standard_normal((n, 3)) * 3).astype(dtype)
+    m[0] = np.nan
+    m[1] = (np.inf, 0.0, 1.0)
+    R = np.linalg.qr(rng.standard_normal((3, 3)))[0].astype(dtype)
+    t = rng.standard_normal(3).astype(dtype)
+    m[2] = np.linalg.solve(R.astype(np.float64), -t.astype(np.float64)).astype(dtype)   # z near 0
+    K_ = np.array([[300.5, 0, 128.25], [0, 310.0, 96.5], [0, 0, 1]], dtype)
+    mc = np.empty((n, 3), dtype)
+    for r in range(3):
+        mc[:, r] = ((m[:, 0] * R[r, 0] + m[:, 1] * R[r, 1]) + m[:, 2] * R[r, 2]) + t[r]
+    with np.errstate(all="ignore"):
+        zs = np.where(mc[:, 2] != 0, mc[:, 2], dtype(1.0))
+        uv = np.stack([K_[0, 0] * mc[:, 0] / zs + K_[0, 2], K_[1, 1] * mc[:, 1] / zs + K_[1, 2]], -1)
+    pc, uv2 = np.empty((n, 3)), np.empty((n, 2))
+    CB._camera_points(m, R, t, K_, dtype(1.0), pc, uv2)
+    assert np.array_equal(pc, mc.astype(np.float64), equal_nan=True)
+    assert np.array_equal(uv2, uv.astype(np.float64), equal_nan=True)
+
+
+@pytest.mark.parametrize("n_feat", [0, 3])
+def test_channel_split_and_join_equal_the_slices(n_feat):
+    rng = np.random.default_rng(3)
+    out = rng.standard_normal((5, 7, 4 + n_feat)).astype(np.float32)
+    rgb, depth = np.empty((5, 7, 3), np.float32), np.empty((5, 7), np.float32)
+    feat = np.empty((5, 7, n_feat), np.float32)
+    CB._deinterleave(out, rgb, depth, feat)
+    assert np.array_equal(rgb, out[..., :3]) and np.array_equal(depth, out[..., 3])
+    assert np.array_equal(feat, out[..., 4:])
+    g = np.full_like(out, np.nan)
+    CB._interleave(rgb, depth, feat, g)
+    assert np.array_equal(g, out)
+    g = np.full_like(out, np.nan)
+    CB._interleave(np.zeros((0, 0, 0), np.float32), depth, feat, g)      # a missing part is zero
+    assert np.all(g[..., :3] == 0) and np.array_equal(g[..., 3:], out[..., 3:])
