@@ -45,18 +45,25 @@ class Adam:
 
     @torch.no_grad()
     def step(self) -> None:
-        """One update of every parameter that has a gradient."""
+        """One update of every parameter that has a gradient.
+
+        The parameters of all groups that share betas, eps, dtype and device are updated by one call
+        of each list op (each group's lr enters through the per-tensor step sizes): the same
+        elementwise arithmetic per tensor as one call per group, in a sixth of the calls for the
+        Gaussians' six groups."""
+        buckets: dict[tuple, list] = {}
         for g in self.param_groups:
-            params = [p for p in g["params"] if p.grad is not None]
-            if not params:
-                continue
-            for p in params:
+            for p in g["params"]:
+                if p.grad is None:
+                    continue
                 if p not in self.state:
                     self.state[p] = {"step": torch.tensor(0.0, dtype=torch.float32),
                                      "exp_avg": torch.zeros_like(p, memory_format=torch.preserve_format),
                                      "exp_avg_sq": torch.zeros_like(p, memory_format=torch.preserve_format)}
-            beta1, beta2 = g["betas"]
-            lr, eps = g["lr"], g["eps"]
+                key = (tuple(g["betas"]), g["eps"], p.dtype, p.device)
+                buckets.setdefault(key, []).append((p, g["lr"]))
+        for ((beta1, beta2), eps, _, _), members in buckets.items():
+            params = [p for p, _ in members]
             states = [self.state[p] for p in params]
             grads = [p.grad for p in params]
             exp_avgs = [s["exp_avg"] for s in states]
@@ -67,7 +74,7 @@ class Adam:
             torch._foreach_addcmul_(exp_avg_sqs, grads, grads, 1 - beta2)
             steps = [s["step"].item() for s in states]
             # guarded: 1 - beta ** step > 0 for 0 <= beta < 1 and step >= 1
-            step_sizes = [-(lr / (1 - beta1 ** t)) for t in steps]
+            step_sizes = [-(lr / (1 - beta1 ** t)) for (_, lr), t in zip(members, steps)]
             bias2_sqrt = [(1 - beta2 ** t) ** 0.5 for t in steps]
             denoms = torch._foreach_sqrt(exp_avg_sqs)
             torch._foreach_div_(denoms, bias2_sqrt)
