@@ -134,7 +134,12 @@ def box_mean(r: Any, size: int = LERF_BLEND_KERNEL) -> np.ndarray:
 def lerf_blend(r: Any, size: int = LERF_BLEND_KERNEL) -> np.ndarray:
     """r' = 0.5 (r + mean30x30(r))."""
     a = finite_float(r, "relevancy")
-    return 0.5 * (a + box_mean(a, size))
+    return _blend(a, box_mean(a, size))
+
+
+def _blend(r: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """`lerf_blend` from r and its box mean (`box_mean`), computed once by the caller."""
+    return 0.5 * (r + mean)
 
 
 def majority_smooth(mask: Any, *, radius: int = LERF_SMOOTH_RADIUS, window: str = "langsplat") -> np.ndarray:
@@ -274,9 +279,8 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
             per_pair.append(entry)
             continue
         maps = _levels(p.relevancy, f"{tag} relevancy")
-        # each level's box mean once, for the blend and the localization (`lerf_blend` is 0.5 (r + mean))
-        avg = [box_mean(m, kernels.blend) for m in maps]
-        blended = [0.5 * (m + a) for m, a in zip(maps, avg)]
+        avg = [box_mean(m, kernels.blend) for m in maps]        # once, for the blend and the localization
+        blended = [_blend(m, a) for m, a in zip(maps, avg)]
         lvl = select_level(blended)
         entry = {"frame": p.frame, "query": p.query, "iou": None, "level": lvl, "localized": None}
         gt = None if p.gt_mask is None else as_mask(p.gt_mask, f"{tag} gt_mask")

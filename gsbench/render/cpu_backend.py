@@ -181,9 +181,9 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
     t64 = np.empty((height, width), dtype=np.float64)
     last = np.empty((height, width), dtype=np.int32)
     spans = np.empty(4 * int(tile_off[-1]), dtype=np.int8)
-    boxes = np.empty((m, cpu_bounds.NBOX), dtype=np.float64)
-    K.gaussian_boxes(gp, boxes)
-    K.raster_forward(gp, boxes, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
+    reach = np.empty((m, cpu_bounds.NBOX), dtype=np.float64)    # where each Gaussian can reach THR
+    K.gaussian_boxes(gp, reach)
+    K.raster_forward(gp, reach, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
                      out, t_out, t64, last, spans, cpu_sched.tile_queue(tile_off), np.zeros(1, np.int64),
                      n_workers)
     state = (gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order, spans)
@@ -307,8 +307,8 @@ class _Projection:
         self.logits = _numpy64(field.opacity_logits)
         self.n = field.num
         # Camera points and centres in the working dtype with the reference's operations, in its
-        # order (R m + t as ((m0 R0 + m1 R1) + m2 R2) + t, then (fx x) / z + cx), in numpy rather than
-        # PyTorch: serial, so no OpenMP workers are left spinning against the numba kernels.
+        # order (R m + t as ((m0 R0 + m1 R1) + m2 R2) + t, then (fx x) / z + cx), in a serial numba pass
+        # rather than PyTorch, so no OpenMP workers are left spinning against the numba kernels.
         R_wc, t_wc, Kt = (a.numpy() for a in camera_tensors(camera, "cpu", dtype))
         self.pc = np.empty((self.n, 3), np.float64)
         uv = np.empty((self.n, 2), np.float64)
