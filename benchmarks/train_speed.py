@@ -7,7 +7,8 @@ For each device (cpu always; cuda where available) and each size N@WxH it prints
 method, all in the same process:
 - reference: a bare training step written directly against the renderer: render RGB + 3 feature
   channels + depth of the same N initial Gaussians and views as the harness rows, L1 against the
-  image (and zero features/depth), backward, Adam step. On CUDA it
+  image (and zero features/depth), backward, Adam step (on the CPU with PyTorch's ops on one thread,
+  as the trainer runs its steps: gsbench.render.threads). On CUDA it
   calls gsplat.rasterization itself; on the CPU it calls gsbench.render with the `cpu` backend (the
   backend the harness uses there);
 - vanilla, gaussiands: `gsbench.runs.train_run` on a generated tabletop-small scene at WxH with
@@ -24,6 +25,7 @@ one process on one machine; absolute it/s depend on the machine and its load.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import tempfile
 import time
@@ -38,6 +40,7 @@ from gsbench import rundir
 from gsbench.gaussians import GaussianField
 from gsbench.methods.adam import Adam
 from gsbench.render import render
+from gsbench.render.threads import torch_ops_serial
 
 
 def _sync(device: torch.device) -> None:
@@ -92,11 +95,13 @@ def reference_its(n: int, w: int, h: int, device: torch.device, iters: int, root
             return torch.cat([out.rgb, out.features, out.depth[..., None]], -1)
 
     def step(k: int) -> None:
-        i = ids[k % len(ids)]
-        loss = (pred_of(views.cameras[i]) - targets[i]).abs().mean()
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
+        # on the CPU, PyTorch's ops on one thread and the kernels on all, as the trainer runs a step
+        with torch_ops_serial() if device.type == "cpu" else contextlib.nullcontext():
+            i = ids[k % len(ids)]
+            loss = (pred_of(views.cameras[i]) - targets[i]).abs().mean()
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
     for k in range(max(3, iters // 10)):
         step(k)
     _sync(device)

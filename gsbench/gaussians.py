@@ -89,14 +89,7 @@ class GaussianField:
         """Per-Gaussian RGB: as given, or SH evaluated towards the Gaussian from the camera."""
         if self.colors.dim() == 2:
             return self.colors
-        if camera_center is None:
-            dirs = torch.zeros_like(self.means)
-            dirs[:, 2] = 1.0
-        else:
-            d = self.means - camera_center.to(self.means)
-            dirs = d / torch.sqrt((d * d).sum(-1, keepdim=True) + 1e-20)
-        # 3DGS / gsplat convention: SH value + 0.5, clamped at 0 (no negative light)
-        return torch.clamp_min(eval_sh(self.colors, dirs) + 0.5, 0.0)
+        return sh_rgb(self.colors, self.means, camera_center)
 
     # ------------------------------------------------------------------ utilities
     def tensors(self) -> dict[str, Optional[torch.Tensor]]:
@@ -144,6 +137,24 @@ def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
         2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
     ], dim=-1).reshape(q.shape[:-1] + (3, 3))
+
+
+def sh_rgb(sh: torch.Tensor, means: Optional[torch.Tensor],
+           camera_center: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """RGB of SH colours sh (N,K,3) seen from `camera_center` (None: along +z) by Gaussians at `means`
+    (N,3): SH value + 0.5, clamped at 0 (3DGS / gsplat: no negative light). Degree 0 (K = 1) does not
+    depend on the direction: its directions are not computed, and `means` may be None."""
+    if sh.shape[1] == 1:
+        return torch.clamp_min(SH_C0 * sh[:, 0] + 0.5, 0.0)
+    if means is None:
+        raise ValueError(f"sh_rgb: SH with {sh.shape[1]} coefficients depends on the direction; means is needed")
+    if camera_center is None:
+        dirs = torch.zeros_like(means)
+        dirs[:, 2] = 1.0
+    else:
+        d = means - camera_center.to(means)
+        dirs = d / torch.sqrt((d * d).sum(-1, keepdim=True) + 1e-20)
+    return torch.clamp_min(eval_sh(sh, dirs) + 0.5, 0.0)
 
 
 def eval_sh(sh: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:

@@ -41,6 +41,7 @@ from gsbench.methods.adam import Adam
 from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
 from gsbench.phases import timed
 from gsbench.render import RenderOutput, render
+from gsbench.render.threads import torch_ops_serial
 from gsbench.store import load_torch
 
 LR_KEYS = {"colors": "color", "opacity_logits": "opacity", "log_scales": "scaling", "quats": "rotation",
@@ -297,7 +298,15 @@ class Trainer:
         """One optimisation step (the harness, gsbench.runs.training, owns the loop around it): the next view,
         render, the method's loss, backward, densification statistics, Adam, densify / prune and the
         opacity reset on their schedule. Values stay on the device; a non-finite loss is flagged in
-        `bad_step` and raised by `raise_if_bad` at the loop's next synchronisation point."""
+        `bad_step` and raised by `raise_if_bad` at the loop's next synchronisation point. On the CPU the
+        step's PyTorch ops run on one thread and the render kernels on all (gsbench.render.threads):
+        faster, and the same bits for any thread count."""
+        if self.device.type != "cpu":
+            return self._iteration()
+        with torch_ops_serial():
+            return self._iteration()
+
+    def _iteration(self) -> StepResult:
         d = self.tcfg["densify"]
         self.step += 1
         lr_pos = self._update_lr()

@@ -27,7 +27,10 @@ from gsbench.camera import Camera
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.render.projection import Projected, project_gaussians
+from gsbench.render.threads import select_numba_threading_layer
 from gsbench.render.torch_backend import rasterize_torch
+
+select_numba_threading_layer()    # before any numba kernel of the cpu backend runs (render/threads.py)
 
 BACKENDS = ("torch", "cpu", "gsplat")
 

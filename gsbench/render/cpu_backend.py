@@ -25,7 +25,7 @@ kernels behind a Function over means2d, conics, opacities and channels of a torc
 How it runs (kernels in gsbench/render/cpu_binning.py and cpu_kernels.py, which says how they
 vectorise):
 1. sort the visible Gaussians by depth (stable), pack the kernels' inputs in that order in one
-   numba pass (`_pack`), bin them into 16x16 tiles with the reference's box-overlap test (serial,
+   numba pass (`_pack`), bin them into 16x16 tiles with the reference's box-overlap test (both threads,
    O(pairs));
 2. forward: one worker per thread (numba prange), each taking the next tile, costliest first, from
    a shared counter until none is left (gsbench/render/cpu_sched.py: numba's `workqueue` layer
@@ -44,34 +44,33 @@ fixed order, and the reduction is serial in a fixed order, so the same inputs gi
 outputs and gradients for any number of threads.
 
 Threads: numba uses min(torch.get_num_threads(), NUMBA_NUM_THREADS) threads, so
-torch.set_num_threads() governs both backends. Threading layer: numba's `workqueue`, unless
-NUMBA_THREADING_LAYER says otherwise. numba's `omp` layer loads the system libgomp next to
-PyTorch's own copy; the two OpenMP runtimes' spinning workers then slow every later PyTorch op
-by 10-30x on a 2-core machine (measured), so it is not used by default. `workqueue` does not
-allow two Python threads to render with the `cpu` backend at the same time.
+torch.set_num_threads() governs both backends; inside a training step torch runs on one thread and
+numba on the count torch had. Threading layer: `tbb` where the tbb package is installed, else
+`workqueue` (gsbench/render/threads.py says why; results are the same bits on both). `workqueue`
+does not allow two Python threads to render with the `cpu` backend at the same time.
 """
 from __future__ import annotations
 
 import math
-import os
 
 import numba
 import numpy as np
 import torch
 
 from gsbench.camera import Camera
-from gsbench.gaussians import GaussianField
+from gsbench.gaussians import GaussianField, sh_rgb
 from gsbench.phases import timed
 from gsbench.render import cpu_binning, cpu_bounds, cpu_sched, rules
 from gsbench.render import cpu_kernels as K
 from gsbench.render import cpu_projection as P
 from gsbench.render.projection import Projected, camera_tensors
+from gsbench.render.threads import kernel_threads, select_numba_threading_layer
 
-# Must precede the first parallel kernel launch. Set in the environment too: numba re-reads its
-# configuration from the environment whenever os.environ changes, which would undo a plain assignment.
-os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
-numba.config.THREADING_LAYER = os.environ["NUMBA_THREADING_LAYER"]
+# Must precede the first parallel kernel launch (gsbench.render chose it, in the environment; numba
+# re-reads its configuration from the environment whenever os.environ changes).
+numba.config.THREADING_LAYER = select_numba_threading_layer()
 
+_TORCH = {np.float32: torch.float32, np.float64: torch.float64}
 ROW_BUDGET_BYTES = 16 * 2**20    # gradient rows of one backward wave (working dtype; at least one tile)
 SKIP_MARGIN = 1e-3              # see cpu_kernels: exponent bound below which alpha < ALPHA_MIN surely
 
@@ -88,8 +87,9 @@ def _consts(np_dtype) -> np.ndarray:
 
 
 def set_numba_threads() -> int:
-    """numba's thread count for the next parallel kernel: torch's, within NUMBA_NUM_THREADS (returned)."""
-    n = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
+    """numba's thread count for the next parallel kernel: `threads.kernel_threads()` (torch's, or the
+    budget of a training step whose torch ops run on one thread), within NUMBA_NUM_THREADS (returned)."""
+    n = max(1, min(kernel_threads(), numba.config.NUMBA_NUM_THREADS))
     numba.set_num_threads(n)
     return n
 
@@ -102,14 +102,15 @@ def _numpy64(t: torch.Tensor) -> np.ndarray:
     return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=np.float64)
 
 
-@numba.njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _pack(order, md, conics, op, radii, ch, amin, margin, gp, ch_s, boxes):
-    """The kernels' inputs in depth order, in one pass: gp (M, NPARAM: centre, conic, opacity, THR =
-    log(ALPHA_MIN / max(opacity, ALPHA_MIN)) - margin in float64, rounded), the channels ch_s and the
-    screen boxes (x0, x1, y0, y1) = centre -+ radius exactly as the reference computes them (the
-    working dtype, the same operations)."""
-    r = np.empty(2, md.dtype)           # the radii rounded to the working dtype (a store casts)
-    for k in range(order.size):
+@numba.njit(parallel=True, cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _pack(order, md, conics, op, radii, ch, amin, margin, gp, ch_s, boxes, reach):
+    """The kernels' inputs in depth order, in one pass over the Gaussians (each row on its own, so on
+    every thread): gp (M, NPARAM: centre, conic, opacity, THR = log(ALPHA_MIN / max(opacity,
+    ALPHA_MIN)) - margin in float64, rounded), the channels ch_s, the screen boxes (x0, x1, y0, y1)
+    = centre -+ radius exactly as the reference computes them (the working dtype, the same
+    operations), and reach (M, NBOX), the box outside which a row's exponent cannot reach THR
+    (`cpu_bounds.box` of the packed row)."""
+    for k in numba.prange(order.size):
         g = order[k]
         mx = md[g, 0]
         my = md[g, 1]
@@ -122,14 +123,22 @@ def _pack(order, md, conics, op, radii, ch, amin, margin, gp, ch_s, boxes):
         gp[k, K.THR] = np.log(amin / np.maximum(np.float64(op[g]), amin)) - margin   # NaN stays NaN
         for j in range(K.THR + 1, K.NPARAM):
             gp[k, j] = 0.0
-        r[0] = radii[g, 0]
-        r[1] = radii[g, 1]
-        boxes[0, k] = mx - r[0]
-        boxes[1, k] = mx + r[0]
-        boxes[2, k] = my - r[1]
-        boxes[3, k] = my + r[1]
+        boxes[1, k] = radii[g, 0]           # the radii rounded to the working dtype (a store casts)
+        boxes[3, k] = radii[g, 1]
+        rx = boxes[1, k]
+        ry = boxes[3, k]
+        boxes[0, k] = mx - rx
+        boxes[1, k] = mx + rx
+        boxes[2, k] = my - ry
+        boxes[3, k] = my + ry
         for c in range(ch.shape[1]):
             ch_s[k, c] = ch[g, c]
+        cx, cy, hx, hy = cpu_bounds.box(gp[k, K.MX], gp[k, K.MY], gp[k, K.CA], gp[k, K.CB], gp[k, K.CC],
+                                        gp[k, K.THR])
+        reach[k, cpu_bounds.E_CX] = cx
+        reach[k, cpu_bounds.E_CY] = cy
+        reach[k, cpu_bounds.E_HX] = hx
+        reach[k, cpu_bounds.E_HY] = hy
 
 
 @numba.njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
@@ -155,10 +164,12 @@ def _scatter_grads(full, ids, g_rgb, g_feat, g_m2d, gr):
         gr[i, P.P_Z] = full[i, K.G_CH + 3]
 
 
-def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
+def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size, split=()):
     """Sort, bin and composite (numpy arrays in the working dtype; rows = visible Gaussians).
 
-    Returns (out (H,W,C), t_final (H,W), state for `_raster_backward`).
+    Returns (outs, t_final (H,W), state for `_raster_backward`): outs are the channel sums as three
+    arrays (H,W,C_0), (H,W,C_1), (H,W,C - C_0 - C_1) with (C_0, C_1) = `split`, (C, 0) by default,
+    written by the kernel directly (the fused render's rgb, depth and features need no copies).
     """
     if not 1 <= tile_size <= K.ROW:
         raise ValueError(f"render backend 'cpu': tile_size must be 1..{K.ROW}, got {tile_size}")
@@ -168,30 +179,31 @@ def _raster_forward(md, conics, op, ch, radii, z, width, height, tile_size):
     gp = np.empty((m, K.NPARAM), dtype=np_dtype)
     ch_s = np.empty_like(ch)
     boxes = np.empty((4, m), dtype=np_dtype)
-    _pack(order, md, conics, op, np.ascontiguousarray(radii), ch, rules.ALPHA_MIN, SKIP_MARGIN, gp, ch_s, boxes)
+    reach = np.empty((m, cpu_bounds.NBOX), dtype=np.float64)    # where each Gaussian can reach THR
     n_workers = set_numba_threads()
+    _pack(order, md, conics, op, radii, ch, rules.ALPHA_MIN, SKIP_MARGIN, gp, ch_s, boxes, reach)
     tile_off, ranks = cpu_binning.bin_tiles(boxes[0], boxes[1], boxes[2], boxes[3], width, height, tile_size,
                                             n_workers)
     pxc = np.arange(width + K.ROW, dtype=np_dtype) + np_dtype(0.5)   # lanes past the image's edge read it (masked)
     pyc = np.arange(height, dtype=np_dtype) + np_dtype(0.5)
     consts = _consts(np_dtype)
     tiles_x = (width + tile_size - 1) // tile_size
-    out = np.empty((height, width, n_ch), dtype=np_dtype)
+    sizes = (*split, n_ch - sum(split)) if split else (n_ch, 0, 0)
+    outs = tuple(np.empty((height, width, c), dtype=np_dtype) for c in sizes)
     t_out = np.empty((height, width), dtype=np_dtype)
     t64 = np.empty((height, width), dtype=np.float64)
     last = np.empty((height, width), dtype=np.int32)
     spans = np.empty(4 * int(tile_off[-1]), dtype=np.int8)
-    reach = np.empty((m, cpu_bounds.NBOX), dtype=np.float64)    # where each Gaussian can reach THR
-    K.gaussian_boxes(gp, reach)
     K.raster_forward(gp, reach, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts,
-                     out, t_out, t64, last, spans, cpu_sched.tile_queue(tile_off), np.zeros(1, np.int64),
+                     outs, t_out, t64, last, spans, cpu_sched.tile_queue(tile_off), np.zeros(1, np.int64),
                      n_workers)
     state = (gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order, spans)
-    return out, t_out, state
+    return outs, t_out, state
 
 
-def _raster_backward(state, g_out_np, g_t_np) -> np.ndarray:
-    """Gradient rows (M, G_CH + C) in the caller's row order (working dtype)."""
+def _raster_backward(state, g_outs, g_t_np) -> np.ndarray:
+    """Gradient rows (M, G_CH + C) in the caller's row order (working dtype) from d loss / d outs
+    (three arrays, laid out as `_raster_forward`'s outs) and d loss / d T."""
     gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last, order, spans = state
     m, n_ch = ch_s.shape
     n_cols = K.G_CH + n_ch
@@ -212,7 +224,7 @@ def _raster_backward(state, g_out_np, g_t_np) -> np.ndarray:
     rows = np.empty((max_rows, n_cols), dtype=gp.dtype)
     for t_lo, t_hi in waves:
         K.raster_backward(gp, ch_s, tile_off, ranks, pxc, pyc, tiles_x, tile_size, consts, t64, last,
-                          g_out_np, g_t_np, t_lo, t_hi, rows, spans, cpu_sched.tile_queue(tile_off, t_lo, t_hi),
+                          g_outs, g_t_np, t_lo, t_hi, rows, spans, cpu_sched.tile_queue(tile_off, t_lo, t_hi),
                           np.zeros(1, np.int64), n_workers)
         K.reduce_rows(tile_off, ranks, order, t_lo, t_hi, rows, full)
     return full
@@ -223,17 +235,19 @@ class _Rasterize(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, means2d, conics, opacities, channels, radii, depths, width, height, tile_size):
-        out, t_out, state = _raster_forward(_numpy(means2d), _numpy(conics), _numpy(opacities),
-                                            _numpy(channels), _numpy(radii), _numpy(depths),
-                                            width, height, tile_size)
+        outs, t_out, state = _raster_forward(_numpy(means2d), _numpy(conics), _numpy(opacities),
+                                             _numpy(channels), _numpy(radii), _numpy(depths),
+                                             width, height, tile_size)
         ctx.state = state
-        return torch.from_numpy(out), torch.from_numpy(t_out)
+        return torch.from_numpy(outs[0]), torch.from_numpy(t_out)
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, g_out, g_t):
         dtype = torch.from_numpy(ctx.state[0][:0]).dtype
-        full = torch.from_numpy(_raster_backward(ctx.state, _numpy(g_out.to(dtype)), _numpy(g_t.to(dtype))))
+        g_np = _numpy(g_out.to(dtype))
+        none = np.zeros(g_np.shape[:2] + (0,), g_np.dtype)
+        full = torch.from_numpy(_raster_backward(ctx.state, (g_np, none, none), _numpy(g_t.to(dtype))))
         need = ctx.needs_input_grad
         return (full[:, K.G_MX:K.G_MY + 1] if need[0] else None,
                 full[:, K.G_CA:K.G_CC + 1] if need[1] else None,
@@ -296,6 +310,38 @@ def _camera_points(m, R, t, K, one, pc, uv):
         uv[g, 1] = K[1, 1] * c1 / z + K[1, 2]
 
 
+@numba.njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _visible(ok, params, radii, params_vis, radii_vis, means2d):
+    """The projected rows of the visible Gaussians (ok), in index order, in one pass: params_vis
+    (M, NPROJ) rounded to its working dtype, radii_vis (M, 2), and means2d (N, 2), the rounded
+    centres with zeros where culled (numpy's gathers, cast and scatter took about 0.6 ms at 19k)."""
+    k = 0
+    for g in range(ok.size):
+        if ok[g]:
+            for j in range(params.shape[1]):
+                params_vis[k, j] = params[g, j]
+            radii_vis[k, 0] = radii[g, 0]
+            radii_vis[k, 1] = radii[g, 1]
+            means2d[g, 0] = params_vis[k, P.P_U]
+            means2d[g, 1] = params_vis[k, P.P_V]
+            k += 1
+        else:
+            means2d[g, 0] = 0.0
+            means2d[g, 1] = 0.0
+
+
+@numba.njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _channels(rgb, z, feat, ids, ch):
+    """ch (M, 4 + d) = the visible Gaussians' rgb (M, 3), depth z (M,) and features feat[ids] (feat
+    (N, d)), in one pass."""
+    for i in range(ids.size):
+        for k in range(3):
+            ch[i, k] = rgb[i, k]
+        ch[i, 3] = z[i]
+        for k in range(feat.shape[1]):
+            ch[i, 4 + k] = feat[ids[i], k]
+
+
 class _Projection:
     """Result of the numba projection of a whole field (float64), shared by forward and backward."""
 
@@ -325,50 +371,11 @@ class _Projection:
         P.project_forward(self.pc, uv, self.log_scales, self.quats, self.logits, self.cam,
                           self.width, self.height, self.np_dtype == np.float32, ok, params, self.radii)
         self.ids = np.flatnonzero(ok)
-        self.params = params[self.ids].astype(self.np_dtype)     # (M, NPROJ) working dtype
-
-
-@numba.njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _deinterleave(out, rgb, depth, feat):
-    """rgb, depth, feat = out[..., :3], out[..., 3], out[..., 4:] as contiguous arrays, in one pass
-    (numpy's strided copies of these slices took about 0.3 ms each at 256x192)."""
-    h, w, c = out.shape
-    for y in range(h):
-        for x in range(w):
-            for k in range(3):
-                rgb[y, x, k] = out[y, x, k]
-            depth[y, x] = out[y, x, 3]
-            for k in range(4, c):
-                feat[y, x, k - 4] = out[y, x, k]
-
-
-@numba.njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _interleave(g_rgb, g_depth, g_feat, g_out):
-    """g_out[..., :3], g_out[..., 3], g_out[..., 4:] = g_rgb, g_depth, g_feat, in one pass (each may be
-    empty: that part is zero)."""
-    h, w, c = g_out.shape
-    for y in range(h):
-        for x in range(w):
-            for k in range(c):
-                g_out[y, x, k] = 0.0
-            if g_rgb.size:
-                for k in range(3):
-                    g_out[y, x, k] = g_rgb[y, x, k]
-            if g_depth.size:
-                g_out[y, x, 3] = g_depth[y, x]
-            if g_feat.size:
-                for k in range(4, c):
-                    g_out[y, x, k] = g_feat[y, x, k - 4]
-
-
-def _split(out: np.ndarray, t_out: np.ndarray) -> tuple[torch.Tensor, ...]:
-    """(H,W,4+d) channel sums -> separate contiguous rgb, depth, features (H,W,d) and T tensors."""
-    h, w, c = out.shape
-    rgb = np.empty((h, w, 3), out.dtype)
-    depth = np.empty((h, w), out.dtype)
-    feat = np.empty((h, w, c - 4), out.dtype)
-    _deinterleave(out, rgb, depth, feat)
-    return torch.from_numpy(rgb), torch.from_numpy(depth), torch.from_numpy(feat), torch.from_numpy(t_out)
+        m = self.ids.size
+        self.params = np.empty((m, P.NPROJ), self.np_dtype)      # (M, NPROJ) working dtype
+        self.radii_vis = np.empty((m, 2), np.int64)
+        self.means2d = np.empty((n, 2), self.np_dtype)           # projected centres; zero where culled
+        _visible(ok, params, self.radii, self.params, self.radii_vis, self.means2d)
 
 
 class _FusedRender(torch.autograd.Function):
@@ -390,22 +397,20 @@ class _FusedRender(torch.autograd.Function):
         n_feat = 0 if features is None else features.shape[1]
         n_ch = 4 + n_feat
         ctx.proj, ctx.n_feat, ctx.has_feat = proj, n_feat, features is not None
+        h, w = proj.height, proj.width
         if m == 0:
             ctx.state = None
-            out = np.zeros((proj.height, proj.width, n_ch), dtype=np_dtype)
-            return _split(out, np.ones((proj.height, proj.width), dtype=np_dtype))
+            return (torch.zeros(h, w, 3, dtype=_TORCH[np_dtype]), torch.zeros(h, w, dtype=_TORCH[np_dtype]),
+                    torch.zeros(h, w, n_feat, dtype=_TORCH[np_dtype]), torch.ones(h, w, dtype=_TORCH[np_dtype]))
         prm = proj.params
         ch = np.empty((m, n_ch), dtype=np_dtype)
-        ch[:, :3] = _numpy(rgb_vis)
-        ch[:, 3] = prm[:, P.P_Z]
-        if n_feat:
-            ch[:, 4:] = _numpy(features)[ids]
-        with timed("raster_forward"):
-            out, t_out, ctx.state = _raster_forward(
-                np.ascontiguousarray(prm[:, P.P_U:P.P_V + 1]), np.ascontiguousarray(prm[:, P.P_CA:P.P_CC + 1]),
-                np.ascontiguousarray(prm[:, P.P_OP]), ch, proj.radii[ids], np.ascontiguousarray(prm[:, P.P_Z]),
-                proj.width, proj.height, tile_size)
-        return _split(out, t_out)
+        _channels(_numpy(rgb_vis), prm[:, P.P_Z], _numpy(features) if n_feat else np.empty((0, 0), np_dtype), ids, ch)
+        with timed("raster_forward"):     # the projected columns as views: _pack reads them in one pass
+            (rgb, depth, feat), t_out, ctx.state = _raster_forward(
+                prm[:, P.P_U:P.P_V + 1], prm[:, P.P_CA:P.P_CC + 1], prm[:, P.P_OP], ch, proj.radii_vis,
+                prm[:, P.P_Z], w, h, tile_size, split=(3, 1))
+        return (torch.from_numpy(rgb), torch.from_numpy(depth.reshape(h, w)), torch.from_numpy(feat),
+                torch.from_numpy(t_out))
 
     @staticmethod
     @torch.autograd.function.once_differentiable
@@ -416,26 +421,21 @@ class _FusedRender(torch.autograd.Function):
         n = proj.n
         ids = proj.ids
         m = ids.size
-        g_means = np.zeros((n, 3), np.float64)
-        g_ls = np.zeros((n, 3), np.float64)
-        g_q = np.zeros((n, 4), np.float64)
-        g_lg = np.zeros(n, np.float64)
+        g_means = np.zeros((n, 3), proj.np_dtype)   # project_backward computes in float64, stores rounded
+        g_ls = np.zeros((n, 3), proj.np_dtype)
+        g_q = np.zeros((n, 4), proj.np_dtype)
+        g_lg = np.zeros(n, proj.np_dtype)
         g_rgb = np.zeros((m, 3), proj.np_dtype)
         g_feat = np.zeros((n, ctx.n_feat), proj.np_dtype)
         g_m2d = np.zeros((n, 2), proj.np_dtype)
         if m > 0:
-            # assembled in numpy (serial): no PyTorch slice-backward ops whose OpenMP workers would
-            # keep spinning while the numba kernels run
             h, w, nf = proj.height, proj.width, ctx.n_feat
-            g_out = np.empty((h, w, 4 + nf), dtype=proj.np_dtype)
-            none3, none2 = np.zeros((0, 0, 0), proj.np_dtype), np.zeros((0, 0), proj.np_dtype)
-            _interleave(none3 if g_rgb_img is None else _numpy(g_rgb_img.to(dtype)),
-                        none2 if g_depth_img is None else _numpy(g_depth_img.to(dtype)),
-                        none3 if g_feat_img is None or not nf else _numpy(g_feat_img.to(dtype)), g_out)
-            g_t_np = (np.zeros((proj.height, proj.width), dtype=proj.np_dtype) if g_t is None
-                      else _numpy(g_t.to(dtype)))
+
+            def grad_np(g, c):    # d loss / d an output as (H, W, c); zeros where none flowed
+                return np.zeros((h, w, c), proj.np_dtype) if g is None else _numpy(g.to(dtype)).reshape(h, w, c)
+            g_outs = (grad_np(g_rgb_img, 3), grad_np(g_depth_img, 1), grad_np(g_feat_img, nf))
             with timed("raster_backward"):
-                full = _raster_backward(ctx.state, g_out, g_t_np)
+                full = _raster_backward(ctx.state, g_outs, grad_np(g_t, 1).reshape(h, w))
             gr = np.empty((m, P.NPROJ), np.float64)
             _scatter_grads(full, ids, g_rgb, g_feat, g_m2d, gr)
             if any(need[:4]):
@@ -445,7 +445,7 @@ class _FusedRender(torch.autograd.Function):
                                        g_means, g_ls, g_q, g_lg)
 
         def t(a, i):
-            return torch.from_numpy(np.ascontiguousarray(a)).to(dtype) if need[i] else None
+            return torch.from_numpy(a) if need[i] else None
 
         return (t(g_means, 0), t(g_ls, 1), t(g_q, 2), t(g_lg, 3), t(g_rgb, 4),
                 t(g_feat, 5) if ctx.has_feat else None, t(g_m2d, 6), None, None)
@@ -474,14 +474,13 @@ def render_fused_cpu(field: GaussianField, camera: Camera, tile_size: int = rule
     with timed("projection"):
         proj = _Projection(field, camera)
     ids_t = torch.from_numpy(proj.ids)
-    if field.colors.dim() == 2:
-        rgb_vis = field.colors[ids_t]
+    colors = field.colors.index_select(0, ids_t)
+    if colors.dim() == 2:
+        rgb_vis = colors
     else:   # SH: evaluated in torch (autograd to colours and, through the view direction, means)
-        sub = GaussianField(field.means[ids_t], field.log_scales[ids_t], field.quats[ids_t],
-                            field.opacity_logits[ids_t], field.colors[ids_t])
-        rgb_vis = sub.rgb(torch.as_tensor(camera.center, dtype=dtype))
-    means2d = torch.zeros(field.num, 2, dtype=dtype)
-    means2d[ids_t] = torch.from_numpy(proj.params[:, P.P_U:P.P_V + 1])
+        means_vis = field.means.index_select(0, ids_t) if colors.shape[1] > 1 else None   # degree 0: no direction
+        rgb_vis = sh_rgb(colors, means_vis, torch.as_tensor(camera.center, dtype=dtype))
+    means2d = torch.from_numpy(proj.means2d)
     if torch.is_grad_enabled() and field.means.requires_grad:   # as the reference's means2d
         means2d.requires_grad_(True)
     rgb, depth, feats, t_final = _FusedRender.apply(field.means, field.log_scales, field.quats,

@@ -30,6 +30,7 @@ from gsbench.errors import InputError, NonFiniteError
 from gsbench.methods.base import Method
 from gsbench.methods.registry import get_method, resolve_for_scene
 from gsbench.runlock import RunLock
+from gsbench.render.threads import numba_threading_layer
 from gsbench.store import read_json, read_jsonl, write_json_atomic
 from gsbench.runs.training import train_method
 
@@ -136,6 +137,8 @@ def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s:
                "iterations": max(steps) if steps else 0, "n_gaussians": n,
                "providers": method.provider_ids(), "dropped": cfg.get("dropped", {}), "backend": method.backend,
                "last_eval": last_eval, "info": getattr(method, "info", {})}
+    if method.backend == "cpu":     # speed only: the kernels give the same bits on every layer
+        summary["numba_threading_layer"] = numba_threading_layer()
     if "peak_cuda_mb" in peaks:
         summary["train_peak_cuda_mb"] = peaks["peak_cuda_mb"]
     write_json_atomic(run_dir / rundir.TRAIN_SUMMARY, summary)

@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import numba
+import numpy as np
 import pytest
 import torch
 
 from gsbench.methods import losses as L
+from gsbench.methods import ssim_cpu as SC
 from gsbench.methods.ssim_cpu import ssim_mean_cpu
 
 
@@ -118,3 +120,41 @@ def test_losses_ssim_takes_it_on_the_cpu_and_accepts_2d_images():
     assert float(L.ssim(a[..., 0], b[..., 0])) == pytest.approx(float(L.ssim_map(a, b).mean()), abs=1e-13)
     with pytest.raises(ValueError, match="shapes differ"):
         L.ssim(a, b[:-1])
+
+
+def _blur_in_tap_order(x: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Zero-padded separable blur of a (H, W) map, each output 0 + its in-range taps added in tap
+    order, rows then columns, in x's dtype (numpy: no fused multiply-add)."""
+    r = g.size // 2
+
+    def along(m, axis):
+        m = np.moveaxis(m, axis, 0)
+        out = np.zeros_like(m)
+        for t in range(g.size):
+            off = t - r
+            lo, hi = max(0, -off), min(m.shape[0], m.shape[0] - off)
+            out[lo:hi] = out[lo:hi] + g[t] * m[lo + off:hi + off]
+        return np.moveaxis(out, 0, axis)
+    return along(along(x, 1), 0)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("shape", [(40, 57, 3), (11, 11, 1), (10, 30, 2), (30, 10, 1), (12, 12, 1)])
+def test_the_written_out_11_tap_blur_adds_in_tap_order(shape, dtype):
+    """The 11-tap path of the statistics' blur (the sum written out) gives the bits of the tap-order
+    loop it replaced, inner pixels and borders, for maps with zeros, negatives and mixed magnitudes."""
+    rng = np.random.default_rng(4)
+    h, w, c = shape
+    a = (rng.standard_normal(shape) * 10.0 ** rng.integers(-4, 3, shape)).astype(dtype)
+    b = rng.random(shape).astype(dtype)
+    a[0, :3] = 0.0
+    a[-1, -2:] = -0.0
+    g = _window(torch.float32 if dtype == np.float32 else torch.float64)
+    st = np.empty((5 * c, h, w), dtype)
+    SC._blur_stats(a, b, g, st)
+    for ch in range(c):
+        x, y = a[..., ch], b[..., ch]
+        for kind, m in enumerate((x, y, x * x, y * y, x * y)):
+            want = _blur_in_tap_order(m, g)
+            assert np.array_equal(st[5 * ch + kind], want), (ch, kind)
+            assert not np.any(np.signbit(st[5 * ch + kind]) & (st[5 * ch + kind] == 0))   # 0 + ...: never -0

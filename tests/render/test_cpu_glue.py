@@ -1,12 +1,13 @@
 """The `cpu` backend's one-pass glue against the numpy it replaced: `_pack` (the kernels' inputs in
 depth order), `_scatter_grads` (the raster's gradient rows to the outputs), `_camera_points` (camera
-points and projected centres), `_deinterleave` and `_interleave` (the channel split and join)."""
+points and projected centres), and the kernels' three outputs (rgb, depth, features) against one."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from gsbench.render import cpu_backend as CB
+from gsbench.render import cpu_bounds as B
 from gsbench.render import cpu_kernels as K
 from gsbench.render import cpu_projection as P
 from gsbench.render import rules
@@ -28,7 +29,8 @@ def test_pack_equals_the_numpy_gathers(dtype):
     gp = np.full((m, K.NPARAM), np.nan, dtype)
     ch_s = np.empty_like(ch)
     boxes = np.empty((4, m), dtype)
-    CB._pack(order, md, conics, op, radii, ch, rules.ALPHA_MIN, CB.SKIP_MARGIN, gp, ch_s, boxes)
+    reach = np.empty((m, B.NBOX))
+    CB._pack(order, md, conics, op, radii, ch, rules.ALPHA_MIN, CB.SKIP_MARGIN, gp, ch_s, boxes, reach)
 
     mo, ro = md[order], radii[order].astype(dtype)
     assert np.array_equal(gp[:, K.MX:K.MY + 1], mo)
@@ -45,6 +47,9 @@ def test_pack_equals_the_numpy_gathers(dtype):
     assert np.array_equal(ch_s, ch[order])
     for got, want in zip(boxes, (mo[:, 0] - ro[:, 0], mo[:, 0] + ro[:, 0], mo[:, 1] - ro[:, 1], mo[:, 1] + ro[:, 1])):
         assert got.dtype == want.dtype and np.array_equal(got, want)
+    for k in (0, 1, 5, 100, m - 1):      # each row's reach box is cpu_bounds.box of the packed row
+        want = B.box.py_func(*(np.float64(gp[k, i]) for i in (K.MX, K.MY, K.CA, K.CB, K.CC, K.THR)))
+        assert np.array_equal(reach[k], np.array(want), equal_nan=True)
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -97,17 +102,47 @@ def test_camera_points_equal_the_numpy_operations(dtype):
 
 
 @pytest.mark.parametrize("n_feat", [0, 3])
-def test_channel_split_and_join_equal_the_slices(n_feat):
+def test_split_outputs_equal_the_slices_of_one_output(n_feat):
+    """The kernels write rgb, depth and features to three arrays (and read their gradients so):
+    the same bits as one (H, W, C) output sliced, forward and backward."""
     rng = np.random.default_rng(3)
-    out = rng.standard_normal((5, 7, 4 + n_feat)).astype(np.float32)
-    rgb, depth = np.empty((5, 7, 3), np.float32), np.empty((5, 7), np.float32)
-    feat = np.empty((5, 7, n_feat), np.float32)
-    CB._deinterleave(out, rgb, depth, feat)
-    assert np.array_equal(rgb, out[..., :3]) and np.array_equal(depth, out[..., 3])
-    assert np.array_equal(feat, out[..., 4:])
-    g = np.full_like(out, np.nan)
-    CB._interleave(rgb, depth, feat, g)
-    assert np.array_equal(g, out)
-    g = np.full_like(out, np.nan)
-    CB._interleave(np.zeros((0, 0, 0), np.float32), depth, feat, g)      # a missing part is zero
-    assert np.all(g[..., :3] == 0) and np.array_equal(g[..., 3:], out[..., 3:])
+    m, w, h = 400, 45, 37
+    md = np.stack([rng.random(m) * w, rng.random(m) * h], 1).astype(np.float32)
+    s = (rng.random(m) * 2 + 0.3).astype(np.float32)
+    conics = np.stack([1 / s**2, (rng.random(m) - 0.5) * 0.1, 1 / s**2], 1).astype(np.float32)
+    op = rng.random(m).astype(np.float32)
+    ch = rng.standard_normal((m, 4 + n_feat)).astype(np.float32)
+    radii = np.full((m, 2), 8, np.int64)
+    z = rng.random(m).astype(np.float32)
+    one, t1, st1 = CB._raster_forward(md, conics, op, ch, radii, z, w, h, 16)
+    (rgb, depth, feat), t3, st3 = CB._raster_forward(md, conics, op, ch, radii, z, w, h, 16, split=(3, 1))
+    out = one[0]
+    assert one[1].shape == one[2].shape == (h, w, 0)
+    assert np.array_equal(rgb, out[..., :3]) and np.array_equal(depth[..., 0], out[..., 3])
+    assert np.array_equal(feat, out[..., 4:]) and np.array_equal(t1, t3)
+    g = rng.standard_normal(out.shape).astype(np.float32)
+    g_t = rng.standard_normal((h, w)).astype(np.float32)
+    none = np.zeros((h, w, 0), np.float32)
+    rows1 = CB._raster_backward(st1, (g, none, none), g_t)
+    rows3 = CB._raster_backward(st3, (np.ascontiguousarray(g[..., :3]), np.ascontiguousarray(g[..., 3:4]),
+                                      np.ascontiguousarray(g[..., 4:])), g_t)
+    assert np.array_equal(rows1, rows3) and np.any(rows1 != 0)
+
+
+def test_reduce_rows_adds_each_gradient_in_row_order():
+    """Each element's rows of tiles [5, 31) are added in row order (tile, then depth rank): float32
+    sums of values of mixed magnitudes, compared bit for bit with numpy adding row by row."""
+    rng = np.random.default_rng(5)
+    m, n_cols, n_tiles = 300, 13, 40
+    counts = rng.integers(0, 60, n_tiles)
+    tile_off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    ranks = rng.integers(0, m, tile_off[-1]).astype(np.int32)
+    order = rng.permutation(m).astype(np.int64)
+    rows = (rng.standard_normal((tile_off[-1], n_cols)) * 10.0 ** rng.integers(-6, 6, (tile_off[-1], 1))
+            ).astype(np.float32)
+    want = np.zeros((m, n_cols), np.float32)
+    for r in range(tile_off[5], tile_off[31]):          # serial, in row order
+        want[order[ranks[r]]] += rows[r - tile_off[5]]
+    got = np.zeros((m, n_cols), np.float32)
+    K.reduce_rows(tile_off, ranks, order, 5, 31, rows, got)
+    assert np.array_equal(got, want)
