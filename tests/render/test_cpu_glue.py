@@ -146,3 +146,26 @@ def test_reduce_rows_adds_each_gradient_in_row_order():
     got = np.zeros((m, n_cols), np.float32)
     K.reduce_rows(tile_off, ranks, order, 5, 31, rows, got)
     assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_visible_rows_and_channels_equal_the_numpy_gathers(dtype):
+    """`_visible` (the visible rows, radii and means2d) and `_channels` against the numpy gathers,
+    cast and scatter they replaced."""
+    rng = np.random.default_rng(6)
+    n, d = 700, 3
+    ok = rng.random(n) < 0.6
+    params = rng.standard_normal((n, P.NPROJ)) * 1e3
+    radii = rng.integers(0, 50, (n, 2))
+    ids = np.flatnonzero(ok)
+    m = ids.size
+    prm, rad, m2d = np.empty((m, P.NPROJ), dtype), np.empty((m, 2), np.int64), np.full((n, 2), np.nan, dtype)
+    CB._visible(ok, params, radii, prm, rad, m2d)
+    assert np.array_equal(prm, params[ids].astype(dtype)) and np.array_equal(rad, radii[ids])
+    want = np.zeros((n, 2), dtype)
+    want[ids] = params[ids, P.P_U:P.P_V + 1].astype(dtype)
+    assert np.array_equal(m2d, want)
+    rgb, feat = rng.random((m, 3)).astype(dtype), rng.random((n, d)).astype(dtype)
+    ch = np.empty((m, 4 + d), dtype)
+    CB._channels(rgb, prm[:, P.P_Z], feat, ids, ch)
+    assert np.array_equal(ch, np.concatenate([rgb, prm[:, P.P_Z:P.P_Z + 1], feat[ids]], 1))
