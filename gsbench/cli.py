@@ -17,7 +17,7 @@ import sys
 from typing import Optional, Sequence
 
 from gsbench import startup
-from gsbench.errors import InputError, NonFiniteError
+from gsbench.errors import InputError, NonFiniteError, interrupted
 
 COMMANDS = {
     "make-scene": ("make_scene", "generate a synthetic scene (analytic ray caster) in 3D-OVS / LERF-OVS layouts"),
@@ -121,8 +121,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             raise
         print(f"gsbench {args.command}: error: {one_line(e)}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        if debug_requested(args):
+    except (KeyboardInterrupt, SystemError) as e:
+        if debug_requested(args) or not interrupted(e):   # a SystemError that is not Ctrl-C is a bug
             raise
         print(f"gsbench {args.command}: interrupted; finished work is saved, re-run to resume", file=sys.stderr)
         return 130

@@ -26,7 +26,7 @@ from gsbench.config import run_id
 from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.device import resolve_device
 from gsbench.environment import PeakMemory, env_info
-from gsbench.errors import InputError, NonFiniteError
+from gsbench.errors import InputError, NonFiniteError, interrupted
 from gsbench.methods.base import Method
 from gsbench.methods.registry import get_method, resolve_for_scene
 from gsbench.runlock import RunLock
@@ -110,10 +110,16 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
     except NonFiniteError as e:
         _finish(run_dir, method, cfg, "nonfinite", str(e), prev_s + time.perf_counter() - t0, memory.read())
         raise
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, SystemError) as e:
+        if not interrupted(e):
+            rundir.write_status(run_dir, "failed", f"{type(e).__name__}: {e}",
+                                train_s_so_far=prev_s + time.perf_counter() - t0)
+            raise
         rundir.write_status(run_dir, "failed", "interrupted; re-run to resume from the last checkpoint",
                 train_s_so_far=prev_s + time.perf_counter() - t0)
-        raise
+        if isinstance(e, KeyboardInterrupt):
+            raise
+        raise KeyboardInterrupt from e      # Ctrl-C during a numba kernel (errors.interrupted)
     except Exception as e:
         rundir.write_status(run_dir, "failed", f"{type(e).__name__}: {e}",
                             train_s_so_far=prev_s + time.perf_counter() - t0)
