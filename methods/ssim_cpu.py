@@ -1,15 +1,16 @@
 """The SSIM training loss on the CPU: a numba forward and a hand-written backward.
 
 `losses.ssim` runs this for CPU tensors; it is the same function as `losses.ssim_map(...).mean()`
-(Gaussian window, zero padding, 3DGS's constants), computed in float64 and returned in the images'
-dtype. The PyTorch version spends most of its time in two grouped convolutions and their backward
+(Gaussian window, zero padding, 3DGS's constants): the blurs in the images' dtype as the PyTorch
+version computes them, the per-pixel SSIM, its derivatives and the sum in float64, the result in the
+images' dtype. The PyTorch version spends most of its time in two grouped convolutions and their backward
 (about 11 ms per 256x192 RGB step on 2 cores); here each of the five local statistics of a channel
 (mu_a, mu_b, E[a^2], E[b^2], E[ab]) is one separable blur, and the backward uses that a zero-padded
 blur with a symmetric window is its own adjoint: d loss / d image is a blur of the per-pixel
 derivatives with respect to the statistics, which the forward computes and keeps.
 
-Serial on purpose: each map is a few hundred microseconds, and results do not depend on the thread
-count (the pixel sum runs in a fixed order).
+Each blurred map, SSIM row and gradient row is one task's (numba prange over the run's threads),
+and the row sums are added in a fixed order, so results do not depend on the thread count.
 """
 from __future__ import annotations
 
