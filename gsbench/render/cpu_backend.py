@@ -64,11 +64,17 @@ from gsbench.render import cpu_binning, cpu_bounds, cpu_sched, rules
 from gsbench.render import cpu_kernels as K
 from gsbench.render import cpu_projection as P
 from gsbench.render.projection import Projected, camera_tensors
-from gsbench.render.threads import kernel_threads, select_numba_threading_layer
+from gsbench.render.threads import kernel_threads, select_numba_threading_layer, tbb_unusable
 
 # Must precede the first parallel kernel launch (gsbench.render chose it, in the environment; numba
 # re-reads its configuration from the environment whenever os.environ changes).
-numba.config.THREADING_LAYER = select_numba_threading_layer()
+_layer = select_numba_threading_layer()
+if _layer == "tbb":
+    try:
+        from numba.np.ufunc import tbbpool  # noqa: F401  (numba's tbb layer: fails on a library it cannot use)
+    except ImportError as e:
+        _layer = tbb_unusable(e)
+numba.config.THREADING_LAYER = _layer
 
 _TORCH = {np.float32: torch.float32, np.float64: torch.float64}
 ROW_BUDGET_BYTES = 16 * 2**20    # gradient rows of one backward wave (working dtype; at least one tile)

@@ -90,17 +90,34 @@ def _load_tbb() -> bool:
     return ok
 
 
+_chosen: Optional[str] = None     # the layer select_numba_threading_layer set itself (not the user)
+
+
 def select_numba_threading_layer() -> str:
     """Choose numba's threading layer (module docstring) unless NUMBA_THREADING_LAYER is set, and
     return it. Set in the environment, which numba reads; call before the first parallel kernel."""
+    global _chosen
     layer = os.environ.get("NUMBA_THREADING_LAYER")
-    if layer and layer != "tbb":
-        return layer
+    if layer and (layer == _chosen or layer != "tbb"):
+        return layer                  # chosen by an earlier call, or the user's (not tbb)
     loaded = _load_tbb()          # also when the user asked for tbb: numba finds pip's library only so
     if not layer:
         layer = "tbb" if loaded else "workqueue"
         os.environ["NUMBA_THREADING_LAYER"] = layer
+        _chosen = layer
     return layer
+
+
+def tbb_unusable(reason: BaseException) -> str:
+    """numba could not load its tbb layer (`reason`): when gsbench chose tbb, use `workqueue` instead
+    (the same bits, slower launches; logged, and recorded in train_summary.json) and return it; when
+    the user asked for tbb, raise."""
+    global _chosen
+    if _chosen != "tbb" or os.environ.get("NUMBA_THREADING_LAYER") != "tbb":
+        raise reason
+    log.warning("numba's tbb threading layer did not load (%s): the cpu kernels use workqueue", reason)
+    os.environ["NUMBA_THREADING_LAYER"] = _chosen = "workqueue"
+    return "workqueue"
 
 
 def numba_threading_layer() -> Optional[str]:
@@ -108,4 +125,5 @@ def numba_threading_layer() -> Optional[str]:
     return os.environ.get("NUMBA_THREADING_LAYER")
 
 
-__all__ = ["kernel_threads", "torch_ops_serial", "select_numba_threading_layer", "numba_threading_layer"]
+__all__ = ["kernel_threads", "torch_ops_serial", "select_numba_threading_layer", "numba_threading_layer",
+           "tbb_unusable"]

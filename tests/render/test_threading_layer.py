@@ -54,6 +54,7 @@ def test_tbb_and_workqueue_render_the_same_bits(tmp_path):
 
 
 def test_the_layer_is_the_users_then_tbb_then_workqueue(monkeypatch):
+    monkeypatch.setattr(threads, "_chosen", None)
     monkeypatch.setenv("NUMBA_THREADING_LAYER", "omp")
     assert threads.select_numba_threading_layer() == "omp"          # the user's choice stands
     monkeypatch.delenv("NUMBA_THREADING_LAYER")
@@ -70,3 +71,16 @@ def test_no_tbb_package_means_no_tbb(monkeypatch):
         raise importlib.metadata.PackageNotFoundError(name)
     monkeypatch.setattr(importlib.metadata, "distribution", missing)
     assert threads._load_tbb() is False
+
+
+def test_a_tbb_numba_cannot_load_falls_back_only_when_gsbench_chose_it(monkeypatch):
+    monkeypatch.setattr(threads, "_chosen", None)
+    monkeypatch.delenv("NUMBA_THREADING_LAYER", raising=False)
+    monkeypatch.setattr(threads, "_load_tbb", lambda: True)
+    assert threads.select_numba_threading_layer() == "tbb"
+    assert threads.tbb_unusable(ImportError("tbbpool")) == "workqueue"
+    assert os.environ["NUMBA_THREADING_LAYER"] == "workqueue"
+    monkeypatch.setenv("NUMBA_THREADING_LAYER", "tbb")         # the user's choice: numba's error stands
+    assert threads.select_numba_threading_layer() == "tbb"
+    with pytest.raises(ImportError, match="tbbpool"):
+        threads.tbb_unusable(ImportError("tbbpool"))
