@@ -406,8 +406,9 @@ class _FusedRender(torch.autograd.Function):
         h, w = proj.height, proj.width
         if m == 0:
             ctx.state = None
-            return (torch.zeros(h, w, 3, dtype=_TORCH[np_dtype]), torch.zeros(h, w, dtype=_TORCH[np_dtype]),
-                    torch.zeros(h, w, n_feat, dtype=_TORCH[np_dtype]), torch.ones(h, w, dtype=_TORCH[np_dtype]))
+            dt = _TORCH[np_dtype]
+            return (torch.zeros(h, w, 3, dtype=dt), torch.zeros(h, w, dtype=dt), torch.zeros(h, w, n_feat, dtype=dt),
+                    torch.ones(h, w, dtype=dt))
         prm = proj.params
         ch = np.empty((m, n_ch), dtype=np_dtype)
         _channels(_numpy(rgb_vis), prm[:, P.P_Z], _numpy(features) if n_feat else np.empty((0, 0), np_dtype), ids, ch)
@@ -423,7 +424,7 @@ class _FusedRender(torch.autograd.Function):
     def backward(ctx, g_rgb_img, g_depth_img, g_feat_img, g_t):
         proj = ctx.proj
         need = ctx.needs_input_grad
-        dtype = torch.float32 if proj.np_dtype == np.float32 else torch.float64
+        dtype = _TORCH[proj.np_dtype]
         n = proj.n
         ids = proj.ids
         m = ids.size

@@ -110,20 +110,16 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
     except NonFiniteError as e:
         _finish(run_dir, method, cfg, "nonfinite", str(e), prev_s + time.perf_counter() - t0, memory.read())
         raise
-    except (KeyboardInterrupt, SystemError) as e:
+    except (KeyboardInterrupt, Exception) as e:
+        so_far = prev_s + time.perf_counter() - t0
         if not interrupted(e):
-            rundir.write_status(run_dir, "failed", f"{type(e).__name__}: {e}",
-                                train_s_so_far=prev_s + time.perf_counter() - t0)
+            rundir.write_status(run_dir, "failed", f"{type(e).__name__}: {e}", train_s_so_far=so_far)
             raise
         rundir.write_status(run_dir, "failed", "interrupted; re-run to resume from the last checkpoint",
-                train_s_so_far=prev_s + time.perf_counter() - t0)
+                            train_s_so_far=so_far)
         if isinstance(e, KeyboardInterrupt):
             raise
         raise KeyboardInterrupt from e      # Ctrl-C during a numba kernel (errors.interrupted)
-    except Exception as e:
-        rundir.write_status(run_dir, "failed", f"{type(e).__name__}: {e}",
-                            train_s_so_far=prev_s + time.perf_counter() - t0)
-        raise
     finally:
         torch.set_num_threads(threads_before)
     train_s = prev_s + time.perf_counter() - t0

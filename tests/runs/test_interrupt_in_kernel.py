@@ -5,9 +5,9 @@ any other SystemError stays a failure."""
 from __future__ import annotations
 
 import pytest
+from render_faults import fail_render_at
 from tiny import TINY_SET
 
-import gsbench.methods.trainer as T
 from gsbench import cli
 from gsbench.config import load_config
 from gsbench.errors import interrupted
@@ -22,21 +22,10 @@ def _kernel_error(cause: BaseException | None) -> SystemError:
         return e
 
 
-def _failing_render(monkeypatch, error: BaseException) -> None:
-    real, calls = T.render, {"n": 0}
-
-    def render(*a, **k):
-        calls["n"] += 1
-        if calls["n"] == 3:
-            raise error
-        return real(*a, **k)
-    monkeypatch.setattr(T, "render", render)
-
-
 def test_ctrl_c_inside_a_kernel_is_an_interruption(tiny_scene, tmp_path, monkeypatch):
     assert interrupted(_kernel_error(KeyboardInterrupt())) and interrupted(KeyboardInterrupt())
     assert not interrupted(_kernel_error(ValueError("x"))) and not interrupted(_kernel_error(None))
-    _failing_render(monkeypatch, _kernel_error(KeyboardInterrupt()))
+    fail_render_at(monkeypatch, 3, _kernel_error(KeyboardInterrupt()))
     with pytest.raises(KeyboardInterrupt):
         train_run(load_config("vanilla", "cpu-small", TINY_SET), tiny_scene, tmp_path / "run", progress=False)
     st = read_json(tmp_path / "run" / "status.json")
@@ -44,14 +33,14 @@ def test_ctrl_c_inside_a_kernel_is_an_interruption(tiny_scene, tmp_path, monkeyp
 
 
 def test_another_system_error_stays_a_failure(tiny_scene, tmp_path, monkeypatch):
-    _failing_render(monkeypatch, _kernel_error(None))
+    fail_render_at(monkeypatch, 3, _kernel_error(None))
     with pytest.raises(SystemError):
         train_run(load_config("vanilla", "cpu-small", TINY_SET), tiny_scene, tmp_path / "run", progress=False)
     assert "SystemError" in read_json(tmp_path / "run" / "status.json")["message"]
 
 
 def test_the_cli_exits_130(tiny_scene, tmp_path, monkeypatch, capsys):
-    _failing_render(monkeypatch, _kernel_error(KeyboardInterrupt()))
+    fail_render_at(monkeypatch, 3, _kernel_error(KeyboardInterrupt()))
     rc = cli.main(["train", "--method", "vanilla", "--preset", "cpu-small", "--scene", str(tiny_scene),
                    "--out", str(tmp_path / "run"), "--no-progress", *[a for s in TINY_SET for a in ("--set", s)]])
     assert rc == 130 and "interrupted" in capsys.readouterr().err

@@ -3,6 +3,7 @@ idempotence, non-finite handling, resume."""
 import numpy as np
 import pytest
 import torch
+from render_faults import fail_render_at
 
 from gsbench.config import load_config
 from gsbench.errors import InputError, NonFiniteError
@@ -126,16 +127,7 @@ def test_resume_after_interruption_matches_uninterrupted(scene, tmp_path, monkey
     import gsbench.methods.trainer as T
     cfg = load_config("gaussiands", "cpu-small", TINY + ["train.eval_every=0"])
     ref = train_run(cfg, scene, tmp_path / "ref", progress=False)
-    real = T.render
-    calls = {"n": 0}
-
-    def flaky(*a, **k):
-        calls["n"] += 1
-        if calls["n"] == 17:
-            raise KeyboardInterrupt
-        return real(*a, **k)
-
-    monkeypatch.setattr(T, "render", flaky)
+    real = fail_render_at(monkeypatch, 17, KeyboardInterrupt())
     with pytest.raises(KeyboardInterrupt):
         train_run(cfg, scene, tmp_path / "int", progress=False)
     assert read_json(tmp_path / "int" / "status.json")["state"] == "failed"
