@@ -6,11 +6,14 @@ VENV := .venv
 VPY := $(VENV)/bin/python
 DEMO := demo_out
 PYTEST_ARGS ?=
+# pytest-xdist workers: the CPUs this process may use, at most 4. Each worker holds torch and the
+# suite's scenes (~0.5 GB); `-n auto` on a 64-core machine would start 64 of them.
+TEST_WORKERS ?= $(shell $(PY) -c "import os; print(max(1, min(4, len(os.sched_getaffinity(0)))))")
 # pip runs only when this stamp is older than pyproject.toml (the install is editable, so code
 # changes need no reinstall).
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test install lint clean stress bench
+.PHONY: demo test install lint clean stress bench claims-page
 
 $(VPY):
 	$(PY) -m venv $(VENV)
@@ -37,7 +40,7 @@ demo: install
 # each xdist worker re-does pytest's assertion rewriting of every test module (collection 10 s
 # instead of 5) and every process a test starts recompiles gsbench.
 test: install
-	env -u PYTHONDONTWRITEBYTECODE $(VENV)/bin/pytest -q -n auto --dist worksteal --durations=10 $(PYTEST_ARGS)
+	env -u PYTHONDONTWRITEBYTECODE $(VENV)/bin/pytest -q -n $(TEST_WORKERS) --dist worksteal --durations=10 $(PYTEST_ARGS)
 
 # ruff's rules and line length are set in pyproject.toml ([tool.ruff]).
 lint: install
@@ -48,6 +51,10 @@ stress: install
 
 bench: install
 	$(VPY) benchmarks/render_cpu.py
+
+# docs/claims.md, its figures and the README's claims block, from the published store (docs/publishing.md)
+claims-page: install
+	$(VENV)/bin/gsbench publish --page docs/claims.md --from results/cpu --readme README.md
 
 clean:
 	rm -rf $(VENV) $(DEMO) build *.egg-info

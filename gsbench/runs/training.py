@@ -63,6 +63,7 @@ def run_phase(tr: Trainer, run_dir: Path, eval_fn: Optional[Callable[[GaussianFi
     log_path = Path(run_dir) / rundir.TRAIN_LOG
     if resume_state is not None:
         tr.load_state(resume_state)
+        log.info("resuming phase %s from its checkpoint at step %d of %d", tr.phase, tr.step, tr.iterations)
         # drop log lines written after the checkpoint (they will be produced again)
         lines = [r for r in read_jsonl(log_path) if r.get("phase") != tr.phase or int(r.get("step", 0)) <= tr.step]
         write_text_atomic(log_path, "".join(json.dumps(r) + "\n" for r in lines))

@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import pytest
@@ -54,8 +55,24 @@ def checkpoint_step(run: Path) -> int:
     return int(load_torch(p)["step"])
 
 
-def start_and_interrupt(cmd: list[str], run: Path, after_step: int, sig: int, log: Path, timeout: float = 900) -> int:
-    """Start `cmd`, wait for a checkpoint newer than `after_step`, send `sig`; return the checkpoint step."""
+def own_status(run: Path, started: float) -> Optional[dict]:
+    """status.json when the process started at `started` has written it (its time is later), else None."""
+    try:
+        st = read_json(run / "status.json")
+    except (OSError, ValueError):
+        return None
+    return st if float(st.get("time", 0.0)) >= started else None
+
+
+def start_and_interrupt(cmd: list[str], run: Path, sig: int, log: Path, timeout: float = 900) -> int:
+    """Start `cmd`, wait until this process has written its own "running" status and then a checkpoint
+    newer than any the folder held when it started, send `sig`; return that checkpoint's step.
+
+    Waiting for the process's own status first matters on a resumed run: the previous run's Ctrl-C
+    already wrote a checkpoint newer than the one the test last read, so a wait for "a newer checkpoint"
+    alone could kill the new process before it wrote anything (seen under a loaded parallel suite)."""
+    before = checkpoint_step(run)
+    started = time.time()
     with open(log, "w") as f:
         # SIGINT back to its default in the child: a shell that starts the test run in the background
         # leaves it ignored, Python then keeps it ignored, and Ctrl-C could not be tested
@@ -64,15 +81,16 @@ def start_and_interrupt(cmd: list[str], run: Path, after_step: int, sig: int, lo
     try:
         t0 = time.time()
         while True:
+            st = own_status(run, started)
             step = checkpoint_step(run)
-            if step > after_step:
+            if st is not None and st["state"] == "running" and step > before:
                 break
             if proc.poll() is not None:
-                pytest.fail(f"training ended (exit {proc.returncode}) before a checkpoint past step {after_step}:\n"
+                pytest.fail(f"training ended (exit {proc.returncode}) before a checkpoint past step {before}:\n"
                             + log.read_text()[-2000:])
             if time.time() - t0 > timeout:
                 pytest.fail("no checkpoint within the time limit")
-            time.sleep(0.1)
+            time.sleep(0.05)
         os.killpg(proc.pid, sig)
         proc.wait(timeout=120)
     finally:
@@ -101,22 +119,26 @@ def test_sigint_then_sigkill_then_resume_gives_a_complete_run(workspace, tmp_pat
                     f"train.log_every={LOG_EVERY}", "train.eval_every=100")
 
     # 1) Ctrl-C right after the first checkpoint: exit 130, status says interrupted, checkpoint kept
-    s1 = start_and_interrupt(cmd, run, 0, signal.SIGINT, tmp_path / "a.log")
+    s1 = start_and_interrupt(cmd, run, signal.SIGINT, tmp_path / "a.log")
     assert 0 < s1 < ITERS
     st = read_json(run / "status.json")
     assert st["state"] == "failed" and "interrupted" in st["message"]
-    assert checkpoint_step(run) >= s1
+    k1 = checkpoint_step(run)            # s1, or the checkpoint the Ctrl-C itself wrote
+    assert s1 <= k1 < ITERS
     run_id = read_json(run / "config.json")["run_id"]
 
-    # 2) re-run, SIGKILL right after it wrote a newer checkpoint (it must have resumed, not restarted)
-    s2 = start_and_interrupt(cmd, run, s1, signal.SIGKILL, tmp_path / "b.log")
-    assert s1 < s2 < ITERS
+    # 2) re-run, SIGKILL right after it wrote a checkpoint of its own; it resumed from k1, not from 0
+    s2 = start_and_interrupt(cmd, run, signal.SIGKILL, tmp_path / "b.log")
+    assert k1 < s2 < ITERS
+    assert f"from its checkpoint at step {k1} of {ITERS}" in (tmp_path / "b.log").read_text()
     assert read_json(run / "status.json")["state"] == "running"      # killed: nothing could update it
-    before = [r for r in loss_lines(run) if r["step"] <= s2]
+    k2 = checkpoint_step(run)
+    before = [r for r in loss_lines(run) if r["step"] <= k2]
 
-    # 3) re-run to the end
+    # 3) re-run to the end, from the killed run's last checkpoint
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-2000:]
+    assert f"from its checkpoint at step {k2} of {ITERS}" in proc.stderr
 
     st = read_json(run / "status.json")
     assert st["state"] == "done" and st["message"] == ""
@@ -135,7 +157,7 @@ def test_sigint_then_sigkill_then_resume_gives_a_complete_run(workspace, tmp_pat
     # starting again from 0 (which would repeat steps) or skipping ahead
     assert steps == list(range(LOG_EVERY, ITERS + 1, LOG_EVERY))
     # what was written before the kill up to the checkpoint is kept as it was
-    assert [r for r in rows if r["step"] <= s2] == before
+    assert [r for r in rows if r["step"] <= k2] == before
     assert all(np.isfinite(r["loss"]["total"]) for r in rows)
 
     # the finished run loads and evaluates into a valid results.json
