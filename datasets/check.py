@@ -16,6 +16,7 @@ import numpy as np
 from gsbench.errors import InputError
 
 from . import ovs
+from .guard import CameraProblems
 from .imageio import image_size, list_images, read_gray
 from .loader import LAYOUTS, SYNTHETIC_META, _attach_synthetic, _base_scene, detect_layout, load_scene
 
@@ -43,6 +44,11 @@ class FolderReport:
         return out
 
 
+def _record(rep: FolderReport, e: InputError) -> None:
+    """One problem line, or one per bad view when the cameras failed their check."""
+    rep.problems.extend(e.problems if isinstance(e, CameraProblems) else [str(e)])
+
+
 def _sizes_text(sizes) -> str:
     return ", ".join(sorted({f"{w}x{h}" for w, h in sizes})) or "-"
 
@@ -52,7 +58,7 @@ def _views(root: Path, layout: str, rep: FolderReport):
     try:
         scene = _base_scene(root, layout)
     except InputError as e:
-        rep.problems.append(str(e))
+        _record(rep, e)
         scene = None
     if scene is not None:
         names = [Path(p).name for p in scene.image_paths]
@@ -80,7 +86,8 @@ def _views(root: Path, layout: str, rep: FolderReport):
         try:
             sizes.append(image_size(p))
         except InputError as e:
-            rep.problems.append(str(e))
+            if str(e) not in rep.problems:     # the camera reader may have named this image already
+                rep.problems.append(str(e))
             sizes.append(None)
     rep.facts.append(f"views     {len(names)} images, {_sizes_text(x for x in sizes if x)}")
     rep.facts.append("poses     none usable (see the problems)")
@@ -129,7 +136,7 @@ def _check_lerf(root: Path, names: list[str], sizes: list, rep: FolderReport) ->
     for i in sorted(files):
         f = files[i]
         try:
-            info, objs = ovs.read_lerf_label(f)
+            info, objs = ovs.read_lerf_label(f, sizes[i], rep.problems)
             w, h = ovs.label_size(f, info, names[i], *sizes[i]) if sizes[i] else (info.get("width"), info.get("height"))
         except InputError as e:
             rep.problems.append(str(e))
@@ -186,7 +193,7 @@ def check_folder(path: str | Path, layout: str = "auto") -> FolderReport:
         try:
             s = load_scene(root, "kaolin")
         except InputError as e:
-            rep.problems.append(str(e))
+            _record(rep, e)
             return rep
         sizes = [(c.width, c.height) for c in s.cameras]
         rep.facts.append(f"views     {len(sizes)} images, {_sizes_text(sizes)}")

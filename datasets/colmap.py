@@ -10,8 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from gsbench.camera import Camera
+from gsbench.camera import ROTATION_TOL, Camera, quaternion_matrix
 from gsbench.errors import InputError
+
+from .guard import RawCamera, build_cameras
 
 # model name -> (fx, fy, cx, cy) parameter indices; the rest are distortion parameters
 _PINHOLE_LIKE = {
@@ -33,6 +35,26 @@ def find_model_dir(root: Path) -> Path | None:
     return None
 
 
+def model_file(model_dir: Path, stem: str) -> Path:
+    """The model's `stem`.bin, else `stem`.txt (the file a camera problem names)."""
+    binary = model_dir / f"{stem}.bin"
+    return binary if binary.is_file() else model_dir / f"{stem}.txt"
+
+
+def _world_to_camera(im) -> np.ndarray:
+    """4x4 world-to-camera of a COLMAP image. pycolmap normalises the stored quaternion when it makes
+    the matrix (a zero quaternion reads as the identity), so a quaternion that is not a unit one is
+    given to the shared pose check in its unnormalised homogeneous form, which the check refuses."""
+    cfw = im.cam_from_world
+    cfw = cfw() if callable(cfw) else cfw  # a method in pycolmap 4, a property before
+    w2c = np.eye(4)
+    w2c[:3, :4] = np.asarray(cfw.matrix(), dtype=np.float64)
+    x, y, z, w = np.asarray(cfw.rotation.quat, dtype=np.float64)
+    if not abs(float(np.sqrt(w * w + x * x + y * y + z * z)) - 1.0) <= ROTATION_TOL:
+        w2c[:3, :3] = quaternion_matrix((w, x, y, z))
+    return w2c
+
+
 def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, np.ndarray | None, dict]:
     """Cameras by image name, sparse points (M x 3), point colours (M x 3 in [0, 1]), meta."""
     import pycolmap
@@ -42,9 +64,10 @@ def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, 
         rec = pycolmap.Reconstruction(str(model_dir))
     except Exception as e:
         raise InputError(f"{model_dir}: cannot read COLMAP model ({type(e).__name__}: {e})") from None
-    cams: dict[str, Camera] = {}
+    cams_file, images_file = (model_file(model_dir, stem) for stem in ("cameras", "images"))
+    raws: list[RawCamera] = []
     distorted = []
-    for _, im in rec.images.items():
+    for im in sorted(rec.images.values(), key=lambda im: im.name):
         if not getattr(im, "has_pose", True):  # pycolmap >= 3.12: frames may be unregistered
             continue
         c = im.camera
@@ -54,17 +77,15 @@ def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, 
         p = np.asarray(c.params, dtype=np.float64)
         ifx, ify, icx, icy = _PINHOLE_LIKE[model]
         K = np.array([[p[ifx], 0.0, p[icx]], [0.0, p[ify], p[icy]], [0.0, 0.0, 1.0]])
-        w2c = np.eye(4)
-        cfw = im.cam_from_world
-        cfw = cfw() if callable(cfw) else cfw  # a method in pycolmap 4, a property before
-        w2c[:3, :4] = np.asarray(cfw.matrix(), dtype=np.float64)
         meta = {"colmap_model": model}
         n_intr = 3 if ifx == ify else 4
         dist = p[n_intr:].tolist()
         if model not in _UNDISTORTED and any(abs(d) > 0 for d in dist):
             meta["distortion"] = {"model": model, "params": dist}
             distorted.append(im.name)
-        cams[im.name] = Camera(K, w2c, int(c.width), int(c.height), name=im.name, meta=meta)
+        raws.append(RawCamera(K, int(c.width), int(c.height), im.name, cams_file, images_file,
+                              world_to_camera=_world_to_camera(im), meta=meta))
+    cams = dict(zip((r.name for r in raws), build_cameras(raws)))
     if not cams:
         raise InputError(f"{model_dir}: COLMAP model has no registered images")
     meta = {"colmap_dir": str(model_dir), "num_points": int(rec.num_points3D())}
@@ -78,6 +99,10 @@ def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, 
         pts = sorted(rec.points3D.items())
         points = np.array([pt.xyz for _, pt in pts], dtype=np.float64)
         colors = np.array([pt.color for _, pt in pts], dtype=np.float64) / 255.0
+        bad = int((~np.isfinite(points)).any(axis=1).sum())
+        if bad:
+            raise InputError(f"{model_file(model_dir, 'points3D')}: {bad} of {len(points)} sparse points "
+                             "hold NaN or inf")
     return cams, points, colors, meta
 
 

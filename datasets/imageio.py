@@ -5,6 +5,8 @@ Every reader goes through these so that a missing or unreadable file is one Inpu
 from __future__ import annotations
 
 import io
+import struct
+import warnings
 from pathlib import Path
 
 import cv2
@@ -13,6 +15,10 @@ import numpy as np
 from gsbench.errors import InputError
 from gsbench.store import write_bytes_atomic
 
+# Images gsbench decodes: at most 100 megapixels (a 12000 x 8000 photo; the public datasets' largest are
+# under 10), checked from the header so that a small file claiming a huge size is never decoded.
+MAX_IMAGE_PIXELS = 100_000_000
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".JPG", ".JPEG", ".PNG", ".bmp", ".tif", ".tiff", ".exr", ".webp")
 
 
@@ -27,24 +33,57 @@ def list_images(folder: Path) -> list[Path]:
     return files
 
 
-def image_size(path: Path) -> tuple[int, int]:
-    """(width, height) from the file header, without decoding the pixels."""
+def _header_size(path: Path) -> tuple[int, int]:
+    """(width, height) from the header: a PNG's IHDR read directly, other formats through PIL's lazy
+    open (its decompression-bomb warning silenced: the budget below decides)."""
     from PIL import Image
 
+    with open(path, "rb") as fh:
+        head = fh.read(24)
+    if head[:8] == PNG_SIGNATURE and head[12:16] == b"IHDR":
+        return struct.unpack(">II", head[16:24])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as im:
+                return int(im.size[0]), int(im.size[1])
+    except Image.DecompressionBombError:     # over PIL's own limit, which lies above the budget
+        raise InputError(f"{path}: refused: more than {MAX_IMAGE_PIXELS} pixels, the most gsbench "
+                         "decodes in one image") from None
+
+
+def image_size(path: Path) -> tuple[int, int]:
+    """(width, height) from the file header, without decoding the pixels; an image of more than
+    MAX_IMAGE_PIXELS pixels is refused here, before anything decodes it."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: image file not found")
     try:
-        with Image.open(path) as im:
-            return int(im.size[0]), int(im.size[1])
+        w, h = _header_size(path)
+    except InputError:
+        raise
     except Exception as e:  # PIL raises several types for unreadable files
-        raise InputError(f"{path}: cannot read image header ({type(e).__name__}: {e})") from None
+        raise InputError(f"{path}: cannot read image header ({type(e).__name__}: {str(e)[:120]})") from None
+    _check_pixels(path, w, h)
+    return w, h
+
+
+def _check_pixels(path: Path, w: int, h: int) -> None:
+    if w * h > MAX_IMAGE_PIXELS:
+        raise InputError(f"{path}: refused: image is {w}x{h}, more than the {MAX_IMAGE_PIXELS} pixels "
+                         "gsbench decodes in one image")
 
 
 def _decode(path: Path, flags: int) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: image file not found")
+    try:
+        _check_pixels(path, *_header_size(path))
+    except InputError:
+        raise
+    except Exception:   # a header PIL cannot read (a corrupt file, EXR): OpenCV's decoder judges it,
+        pass            # within its own limit of 2^30 pixels
     data = np.fromfile(str(path), dtype=np.uint8)
     img = cv2.imdecode(data, flags) if data.size else None
     if img is None:

@@ -16,6 +16,7 @@ import numpy as np
 from gsbench.camera import Camera
 from gsbench.errors import InputError
 
+from .guard import RawCamera, build_cameras
 from .imageio import image_size
 from .nerf import read_json_input
 
@@ -34,7 +35,7 @@ def read_kaolin(root: Path) -> tuple[list[Camera], list[Path], list[Path]]:
     ids = sorted(int(m.group(1)) for p in views.iterdir() if (m := RGB_RE.match(p.name)))
     if not ids:
         raise InputError(f"{views}: no {{i}}_rgb.png files")
-    cams, rgbs, sems = [], [], []
+    raws, rgbs, sems = [], [], []
     for i in ids:
         rgb = views / f"{i}_rgb.png"
         sem = views / f"{i}_semantic.png"
@@ -48,14 +49,13 @@ def read_kaolin(root: Path) -> tuple[list[Camera], list[Path], list[Path]]:
             focal = float(cp["focal_length"])
             aperture = float(cp["horizontal_aperture"])
         except (KeyError, TypeError, ValueError) as e:
-            raise InputError(f"{mp}: missing or malformed camera_properties ({e})") from None
-        if tf.shape != (4, 4) or not np.all(np.isfinite(tf)) or focal <= 0 or aperture <= 0:
-            raise InputError(f"{mp}: tf_mat must be a finite 4x4 and focal / aperture positive")
+            raise InputError(f"{mp}: missing or malformed camera_properties ({str(e)[:80]})") from None
+        if tf.shape != (4, 4) or not aperture > 0:     # the aperture is divided by below
+            raise InputError(f"{mp}: tf_mat must be a 4x4 and horizontal_aperture positive")
         w, h = image_size(rgb)
         f = w * focal / aperture
         K = np.array([[f, 0, w / 2.0], [0, f, h / 2.0], [0, 0, 1.0]])
-        w2c = USD_TO_CV @ tf.T
-        cams.append(Camera(K, w2c, w, h, name=rgb.name))
+        raws.append(RawCamera(K, w, h, rgb.name, mp, mp, world_to_camera=USD_TO_CV @ tf.T))
         rgbs.append(rgb)
         sems.append(sem)
-    return cams, rgbs, sems
+    return build_cameras(raws), rgbs, sems

@@ -14,6 +14,7 @@ import numpy as np
 from gsbench.camera import Camera
 from gsbench.errors import InputError
 
+from .guard import RawCamera, build_cameras
 from .imageio import read_npy, write_npy
 
 
@@ -43,24 +44,24 @@ def read_poses_bounds(
     """Cameras (scaled to the actual image sizes) and the (N, 2) near/far bounds."""
     path = Path(path)
     arr = read_npy(path)
-    if arr.ndim != 2 or arr.shape[1] != 17:
-        raise InputError(f"{path}: expected an N x 17 array, got shape {arr.shape}")
+    if arr.dtype.kind not in "fiu" or arr.ndim != 2 or arr.shape[1] != 17:
+        raise InputError(f"{path}: expected an N x 17 array of numbers, got {arr.dtype} of shape {arr.shape}")
     if len(arr) != len(image_sizes):
         raise InputError(f"{path}: {len(arr)} poses but {len(image_sizes)} images")
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"{path}: contains NaN or inf")
-    cams = []
+    if not np.all(np.isfinite(arr[:, 15:17])):
+        raise InputError(f"{path}: near / far bounds hold NaN or inf")
+    raws = []
     for row, (w, h), name in zip(arr, image_sizes, names):
         m = row[:15].reshape(3, 5)
         H0, W0, f = m[:, 4]
-        if H0 <= 0 or W0 <= 0 or f <= 0:
-            raise InputError(f"{path}: pose of {name} has non-positive H, W or focal ({H0}, {W0}, {f})")
+        if not (H0 > 0 and W0 > 0):     # the image size the focal length is given at: divided by below
+            raise InputError(f"{path}: pose of {name} has a non-positive or non-finite H, W ({H0}, {W0})")
         sx, sy = w / W0, h / H0
         if abs(sx - sy) > 0.01 * max(sx, sy):
             raise InputError(f"{path}: image {name} is {w}x{h}, poses say {W0:g}x{H0:g} (different aspect ratio)")
         K = np.array([[f * sx, 0.0, w / 2.0], [0.0, f * sy, h / 2.0], [0.0, 0.0, 1.0]])
-        c2w = llff_to_opencv_c2w(m[:, :4])
-        cams.append(Camera(K, np.linalg.inv(c2w), w, h, name=name))
+        raws.append(RawCamera(K, w, h, name, path, path, camera_to_world=llff_to_opencv_c2w(m[:, :4])))
+    cams = build_cameras(raws)
     return cams, arr[:, 15:17].copy()
 
 

@@ -26,6 +26,7 @@ from . import llff as llff_io
 from . import nerf as nerf_io
 from . import ovs
 from .base import Scene
+from .guard import inside_scene
 from .imageio import image_size, list_images, read_gray, read_npy, read_rgb
 
 LAYOUTS = ("auto", "colmap", "llff", "nerf", "3dovs", "lerf", "3dovs+lerf", "both", "kaolin")
@@ -78,7 +79,7 @@ def _from_colmap(root: Path):
     names = sorted(cams)
     paths = []
     for n in names:
-        p = img_dir / n
+        p = inside_scene(root, str(Path("images") / n), colmap_io.model_file(mdir, "images"), "image name")
         if not p.is_file():
             raise InputError(f"{p}: image listed in the COLMAP model {mdir} is missing")
         w, h = image_size(p)
@@ -181,8 +182,8 @@ def _attach_lerf(scene: Scene, root: Path) -> None:
     queries: set[str] = set()
     parsed = {}
     for i, f in files.items():
-        info, objs = ovs.read_lerf_label(f)
         cam = scene.cameras[i]
+        info, objs = ovs.read_lerf_label(f, (cam.width, cam.height))
         w, h = ovs.label_size(f, info, cam.name, cam.width, cam.height)
         scene.label_sizes[i] = (w, h)
         scene.raw_labels[i] = objs
@@ -211,7 +212,7 @@ def _attach_synthetic(scene: Scene, root: Path) -> None:
     scene.meta["split"] = "explicit (gsbench_scene.json)"
     stems = [Path(x).stem for x in names]
     sizes = [(c.width, c.height) for c in scene.cameras]
-    gt = root / meta.get("gt_dir", "gt")
+    gt = inside_scene(root, str(meta.get("gt_dir", "gt")), mp, "gt_dir")
 
     def depth(i: int) -> np.ndarray:
         p = gt / "depth" / f"{stems[i]}.npy"

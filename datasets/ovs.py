@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import Optional
 
 import cv2
 import numpy as np
@@ -22,7 +23,8 @@ import numpy as np
 from gsbench.errors import InputError
 
 from .base import LabelObject
-from .imageio import read_gray
+from .imageio import MAX_IMAGE_PIXELS, read_gray
+from .label_limits import MAX_LABEL_BYTES, MAX_OBJECTS, label_problems, too_many_points
 from .nerf import read_json_input
 
 FRAME_RE = re.compile(r"^frame_(\d+)\.json$")
@@ -37,10 +39,20 @@ def read_classes(seg_dir: Path) -> list[str]:
     names = [ln.strip() for ln in f.read_text(encoding="utf-8").splitlines() if ln.strip()]
     if not names:
         raise InputError(f"{f}: no class names")
+    for n in names:
+        if not plain_name(n):
+            raise InputError(f"{f}: class name {n[:80]!r} is not a plain file name (each class names the "
+                             "mask file <class>.png of a view folder: no '/', '\\', NUL, '.' or '..')")
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise InputError(f"{f}: duplicate class names {dup}")
     return sorted(names)
+
+
+def plain_name(name: str) -> bool:
+    """Whether `name` can stand for one file in one folder: no path separator, no NUL, not '.' or
+    '..' (a class name like '../x' would make `<class>.png` a file outside the view folder)."""
+    return bool(name) and not any(c in name for c in "/\\\x00") and name not in (".", "..")
 
 
 def _problem(problems: list[str] | None, message: str) -> None:
@@ -130,18 +142,31 @@ def label_files(label_dir: Path, n_views: int, problems: list[str] | None = None
     return out
 
 
+def _info_size(path: Path, info: dict) -> Optional[tuple[int, int]]:
+    """(W, H) of `info.width/height`, None when the file does not give them; checked positive and
+    within the pixel budget of an image (the masks are drawn at this size)."""
+    w, h = info.get("width"), info.get("height")
+    if w is None or h is None:
+        return None
+    try:
+        w, h = int(w), int(h)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{path}: info.width / info.height are not integers ({str(w)[:20]!r}, "
+                         f"{str(h)[:20]!r})") from None
+    if w < 1 or h < 1:
+        raise InputError(f"{path}: label size {w}x{h} is not positive")
+    if w * h > MAX_IMAGE_PIXELS:
+        raise InputError(f"{path}: label size {w}x{h} is more than the {MAX_IMAGE_PIXELS} pixels of an image")
+    return w, h
+
+
 def label_size(path: Path, info: dict, image_name: str, width: int, height: int) -> tuple[int, int]:
     """(W, H) a label file was drawn at: `info.width/height`, else the image's size. A label of
     another aspect ratio than its image is an error (it cannot be scaled onto it)."""
-    w, h = info.get("width"), info.get("height")
-    if w is None or h is None:
+    size = _info_size(path, info)
+    if size is None:
         return width, height
-    try:
-        w, h = int(w), int(h)
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: info.width / info.height are not integers ({w!r}, {h!r})") from None
-    if w < 1 or h < 1:
-        raise InputError(f"{path}: label size {w}x{h} is not positive")
+    w, h = size
     sx, sy = width / float(w), height / float(h)
     if abs(sx - sy) > 0.01 * max(sx, sy):
         raise InputError(f"{path}: label size {w}x{h} has another aspect ratio than image {image_name} "
@@ -149,10 +174,14 @@ def label_size(path: Path, info: dict, image_name: str, width: int, height: int)
     return w, h
 
 
-def _points(seg, path: Path, k: int) -> list[np.ndarray]:
-    """A segmentation as a list of (K, 2) polygons: [[x, y], ...] or [[[x, y], ...], ...] or COCO flat lists."""
+def _points(seg, path: Path, k: int, grid: Optional[tuple[int, int]]) -> list[np.ndarray]:
+    """A segmentation as a list of (K, 2) polygons: [[x, y], ...] or [[[x, y], ...], ...] or COCO flat
+    lists. A huge one is refused before conversion when the label grid is known."""
     if not isinstance(seg, list) or not seg:
         raise InputError(f"{path}: object {k}: 'segmentation' is not a non-empty list")
+    huge = too_many_points(path, k, len(seg), *grid) if grid else None
+    if huge:
+        raise InputError(huge)
     try:
         a = np.asarray(seg, dtype=np.float64)
         if a.ndim == 2 and a.shape[1] == 2:
@@ -172,27 +201,53 @@ def _points(seg, path: Path, k: int) -> list[np.ndarray]:
     return polys
 
 
-def read_lerf_label(path: Path) -> tuple[dict, list[LabelObject]]:
-    """`info` dict and the label objects of one LERF-OVS label file."""
+def _numbers(value, n: Optional[int], path: Path, k: int, key: str) -> Optional[tuple]:
+    """A finite number (n None) or a list of n finite numbers from an object's field, or None."""
+    if value is None:
+        return None
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    if a.shape != (() if n is None else (n,)) or not np.all(np.isfinite(a)):
+        what = "a finite number" if n is None else f"a list of {n} finite numbers"
+        raise InputError(f"{path}: object {k}: '{key}' is not {what}")
+    return float(a) if n is None else tuple(float(v) for v in a)
+
+
+def read_lerf_label(path: Path, image_size: Optional[tuple[int, int]] = None,
+                    problems: Optional[list[str]] = None) -> tuple[dict, list[LabelObject]]:
+    """`info` dict and the label objects of one LERF-OVS label file, checked against the limits of
+    `datasets/label_limits.py` on its grid (`info.width/height`, else `image_size` when given). A
+    file that breaks a limit is refused with the first and a count, or, when `problems` is a list,
+    every broken limit is appended to it and the objects returned (`gsbench data check`)."""
     path = Path(path)
+    size = path.stat().st_size if path.is_file() else 0
+    if size > MAX_LABEL_BYTES:
+        raise InputError(f"{path}: refused: {size} bytes, more than the {MAX_LABEL_BYTES // 2**20} MiB a label "
+                         "file may hold")
     d = read_json_input(path)
     if not isinstance(d, dict) or not isinstance(d.get("objects"), list):
         raise InputError(f"{path}: expected an object with an 'objects' list")
     info = d.get("info") or {}
     if not isinstance(info, dict):
         raise InputError(f"{path}: 'info' is not an object")
+    grid = _info_size(path, info) or (tuple(int(v) for v in image_size) if image_size else None)
+    if len(d["objects"]) > MAX_OBJECTS:
+        raise InputError(f"{path}: {len(d['objects'])} objects, more than the {MAX_OBJECTS} a label file may hold")
     objs = []
     for k, o in enumerate(d["objects"]):
         if not isinstance(o, dict) or not isinstance(o.get("category"), str) or not o["category"].strip():
             raise InputError(f"{path}: object {k} has no 'category' string")
-        bbox = o.get("bbox")
-        if bbox is not None:
-            if not (isinstance(bbox, list) and len(bbox) == 4):
-                raise InputError(f"{path}: object {k}: 'bbox' is not [x1, y1, x2, y2]")
-            bbox = tuple(float(v) for v in bbox)
-        area = o.get("area")
-        objs.append(LabelObject(category=o["category"].strip(), polygons=_points(o.get("segmentation"), path, k),
-                                bbox=bbox, area=None if area is None else float(area)))
+        objs.append(LabelObject(category=o["category"].strip(), polygons=_points(o.get("segmentation"), path, k, grid),
+                                bbox=_numbers(o.get("bbox"), 4, path, k, "bbox"),
+                                area=_numbers(o.get("area"), None, path, k, "area")))
+    broken = label_problems(path, objs, *grid) if grid else []
+    if broken and problems is not None:
+        problems.extend(broken)
+    elif broken:
+        more = f" (and {len(broken) - 1} more problems in this file)" if len(broken) > 1 else ""
+        raise InputError(broken[0] + more)
     return info, objs
 
 

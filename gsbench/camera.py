@@ -121,6 +121,69 @@ class Camera:
         return cls(np.array(d["K"]), np.array(d["world_to_camera"]), d["width"], d["height"], d.get("name", ""))
 
 
+# --------------------------------------------------------------------------------- the camera check
+ROTATION_TOL = 1e-3   # largest |R R^T - I| entry and |det R - 1| of a pose rotation still taken as one
+
+
+def intrinsics_problems(K, width: int, height: int) -> list[str]:
+    """Why `K` (3x3 pixels) cannot be a pinhole camera of a width x height image; empty when it can.
+
+    The one check every layout reader runs (`gsbench.datasets.base.build_cameras`): finite values,
+    focal lengths > 0 (a zero one divides by zero in the projection, a negative one mirrors the
+    image), the principal point inside the image."""
+    if int(width) < 1 or int(height) < 1:
+        return [f"image size {width}x{height} is not positive"]
+    k = np.asarray(K, dtype=np.float64)
+    if k.shape != (3, 3):
+        return [f"intrinsics have shape {k.shape}, not 3x3"]
+    if not np.all(np.isfinite(k)):
+        return ["intrinsics hold NaN or inf"]
+    out = []
+    for name, f in (("fx", k[0, 0]), ("fy", k[1, 1])):
+        if not f > 0:
+            out.append(f"focal length {name}={f:.6g} is not positive")
+    cx, cy = k[0, 2], k[1, 2]
+    if not (0 <= cx <= width and 0 <= cy <= height):
+        out.append(f"principal point ({cx:.6g}, {cy:.6g}) lies outside the {width}x{height} image")
+    return out
+
+
+def pose_problems(world_to_camera) -> list[str]:
+    """Why a 4x4 world-to-camera matrix is not a rigid pose; empty when it is.
+
+    Finite values, last row [0, 0, 0, 1], and a proper rotation: orthonormal (every entry of R R^T
+    within ROTATION_TOL of the identity) with det R within ROTATION_TOL of +1. A rank-deficient,
+    scaled or mirrored rotation renders a distorted scene without any error, so it is refused."""
+    m = np.asarray(world_to_camera, dtype=np.float64)
+    if m.shape != (4, 4):
+        return [f"pose has shape {m.shape}, not 4x4"]
+    if not np.all(np.isfinite(m)):
+        return ["pose holds NaN or inf"]
+    out = []
+    if np.max(np.abs(m[3] - [0.0, 0.0, 0.0, 1.0])) > ROTATION_TOL:
+        out.append(f"pose's last row is {np.array2string(m[3], precision=3)}, not [0 0 0 1]")
+    R = m[:3, :3]
+    with np.errstate(over="ignore", invalid="ignore"):    # a huge entry gives inf: still not a rotation
+        err = float(np.max(np.abs(R @ R.T - np.eye(3))))
+        det = float(np.linalg.det(R))
+    if not (err <= ROTATION_TOL and abs(det - 1.0) <= ROTATION_TOL):
+        out.append(f"rotation is not a proper rotation: det {det:.3g} (must be 1 +- {ROTATION_TOL:g}), "
+                   f"R R^T off the identity by up to {err:.3g} (at most {ROTATION_TOL:g})")
+    return out
+
+
+def quaternion_matrix(wxyz) -> np.ndarray:
+    """3x3 matrix of a quaternion (w, x, y, z) in the homogeneous form, without normalising: a unit
+    quaternion gives its rotation, one of norm s gives s^2 times it and the zero quaternion the zero
+    matrix, so the pose check refuses a quaternion that is not a unit one (normalising readers turn
+    zero into the identity)."""
+    w, x, y, z = (float(v) for v in wxyz)
+    return np.array([
+        [w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z]])
+
+
 def training_size(camera: Camera, max_width: Optional[int]) -> tuple[int, int]:
     """(W, H) of the training images: the camera's size, downscaled to at most `max_width` wide (the
     rule training and evaluation at the training resolution share, so it sits beside Camera)."""

@@ -8,7 +8,8 @@ This module is the one path by which a value enters a config: `gsbench train --s
 ablate --set`, presets and grid files (base.set, axes, sweeps, extra cells) all go through
 `parse_overrides` (strings or mappings -> {dotted key: value}) and `check_value` / `apply_overrides`
 (key known, type as in default.yaml, range or choices as in gsbench/config_keys.py). Values are
-read by one YAML reader (`load_yaml`), which reads `1e-4` as a number (YAML 1.1 would read a string).
+read by one YAML reader (`load_yaml`), which reads `1e-4` as a number (YAML 1.1 would read a string)
+and refuses a text over its size, node (aliases expanded) or depth budget.
 Unknown keys are an error with close-match suggestions (a typo must not silently do nothing).
 A preset is a shipped name (gsbench/configs/<name>.yaml) or a path to a YAML file.
 """
@@ -20,6 +21,7 @@ import functools
 import hashlib
 import json
 import re
+import reprlib
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Optional
 
@@ -28,12 +30,16 @@ import yaml
 from gsbench.config_keys import FREE_MAPPINGS, METHODS, RULES, Rule
 from gsbench.errors import InputError
 from gsbench.method_table import get_spec, section_defaults
+from gsbench.store import read_text_bounded
 
 CONFIG_DIR = Path(__file__).parent / "configs"
 # keys that do not change what a run computes (where files go, how often it logs)
 # keys that change where things are kept, not the results: left out of the run id (a run trained with
 # train.data_on=device resumes with host, and the other way round)
 NON_RESULT_KEYS = (("priors", "cache_dir"), ("train", "data_on"))
+# keys added after run folders were stored: left out of the hash while they hold their null default,
+# so the run ids (and config keys) of configs that do not set them stay what they were
+NULL_DEFAULT_KEYS = (("train", "views"),)
 _NO_DEFAULT = object()
 
 
@@ -48,23 +54,103 @@ _Loader.add_implicit_resolver("tag:yaml.org,2002:float",
                               list("-+0123456789"))
 
 
-def load_yaml(text: str) -> Any:
-    """The one YAML reader of configs, presets, grid files and `--set` values."""
-    return yaml.load(text, Loader=_Loader)
+# Budgets of every YAML text gsbench reads. The largest shipped file is 7 KB and 278 nodes. An alias
+# repeats a node without repeating its text, so ten lines can stand for a billion nodes ("billion
+# laughs"): the node budget counts every node as often as aliases repeat it, before anything is built.
+MAX_YAML_BYTES = 1024 * 1024
+MAX_YAML_NODES = 50_000
+MAX_YAML_DEPTH = 64
+
+
+def _check_nodes(root: yaml.Node, where: str) -> None:
+    """Refuse a composed document over MAX_YAML_NODES (counting a node as often as aliases repeat it)
+    or nested deeper than MAX_YAML_DEPTH, before anything is built. The walk stops at the first limit
+    it meets, so an alias bomb costs at most MAX_YAML_NODES steps and an alias to itself (a node that
+    contains itself) is refused as too deep; the depth limit also bounds the walk's recursion."""
+    seen = 0
+
+    def visit(node: yaml.Node, depth: int) -> None:      # a mapping or sequence node
+        nonlocal seen
+        if depth >= MAX_YAML_DEPTH:
+            raise InputError(f"{where}: refused: YAML nested deeper than {MAX_YAML_DEPTH} levels")
+        if type(node) is yaml.MappingNode:
+            seen += 2 * len(node.value)
+            inner = [n for pair in node.value for n in pair if type(n) is not yaml.ScalarNode]
+        else:
+            seen += len(node.value)
+            inner = [n for n in node.value if type(n) is not yaml.ScalarNode]
+        if seen > MAX_YAML_NODES:
+            raise InputError(f"{where}: refused: YAML of more than {MAX_YAML_NODES} nodes once its aliases "
+                             "are expanded (an alias bomb?)")
+        for child in inner:
+            visit(child, depth + 1)
+
+    if type(root) is not yaml.ScalarNode:
+        visit(root, 0)
+
+
+def _yaml_problem(e: yaml.YAMLError) -> str:
+    """A YAML error on one short line: the problem and where it is (libyaml's text spans lines)."""
+    problem = getattr(e, "problem", None) or str(e)
+    mark = getattr(e, "problem_mark", None)
+    at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    return short_text(" ".join(str(problem).split())) + at
+
+
+def load_yaml(text: str, where: str = "YAML") -> Any:
+    """The one YAML reader of configs, presets, grid files and `--set` values. A text over the budgets
+    above, or one that is not YAML, is an InputError naming `where` (never echoing the text)."""
+    if len(text) > MAX_YAML_BYTES:
+        raise InputError(f"{where}: refused: {len(text)} characters of YAML, more than the "
+                         f"{MAX_YAML_BYTES // 2**20} MiB gsbench reads")
+    loader = _Loader(text)
+    try:
+        root = loader.get_single_node()
+        if root is None:
+            return None
+        _check_nodes(root, where)
+        return loader.construct_document(root)
+    except yaml.YAMLError as e:
+        if "maximum nesting depth" in str(e):     # libyaml's own limit (1000 levels)
+            raise InputError(f"{where}: refused: YAML nested deeper than {MAX_YAML_DEPTH} levels") from None
+        raise InputError(f"{where}: invalid YAML ({_yaml_problem(e)})") from None
+    except RecursionError:                       # PyYAML's Python parser, where libyaml is missing
+        raise InputError(f"{where}: refused: YAML nested deeper than {MAX_YAML_DEPTH} levels") from None
+    finally:
+        loader.dispose()
+
+
+def load_yaml_file(path: str | Path) -> Any:
+    """A YAML file through `load_yaml`; one over MAX_YAML_BYTES is refused before it is read."""
+    path = Path(path)
+    try:
+        text = read_text_bounded(path, MAX_YAML_BYTES, "YAML")
+    except FileNotFoundError as e:
+        raise InputError(str(e)) from None
+    return load_yaml(text, str(path))
 
 
 def _read_yaml(path: Path) -> dict:
-    try:
-        data = load_yaml(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{path}: config file not found") from None
-    except yaml.YAMLError as e:
-        raise InputError(f"{path}: invalid YAML ({e})") from None
+    data = load_yaml_file(path)
     if data is None:
         return {}
     if not isinstance(data, dict):
         raise InputError(f"{path}: a config file must be a mapping, got {type(data).__name__}")
     return data
+
+
+_SHORT = reprlib.Repr()
+_SHORT.maxlevel, _SHORT.maxlist, _SHORT.maxdict, _SHORT.maxstring, _SHORT.maxother = 3, 8, 6, 60, 60
+
+
+def short_text(text: str, limit: int = 120) -> str:
+    """`text` cut to `limit` characters, for messages."""
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def short_repr(value: Any, limit: int = 120) -> str:
+    """repr() for messages: a long list, mapping or string is cut (an error line never echoes a file)."""
+    return short_text(_SHORT.repr(value), limit)
 
 
 def default_tree() -> dict:
@@ -123,15 +209,12 @@ def parse_overrides(overrides: Mapping | Iterable[str] | None, where: str = "--s
     out: dict[str, Any] = {}
     for item in overrides:
         if not isinstance(item, str) or "=" not in item:
-            raise InputError(f"{where} {item!r}: expected key=value (e.g. train.iterations=300)")
+            raise InputError(f"{where} {short_repr(item)}: expected key=value (e.g. train.iterations=300)")
         k, v = item.split("=", 1)
         key = k.strip()
         if not key or any(not p for p in key.split(".")):
-            raise InputError(f"{where} {item!r}: empty key")
-        try:
-            out[key] = load_yaml(v) if v.strip() else None
-        except yaml.YAMLError as e:
-            raise InputError(f"{where} {item!r}: value is not valid YAML ({e})") from None
+            raise InputError(f"{where} {short_repr(item)}: empty key")
+        out[key] = load_yaml(v, f"{where} {short_text(key, 80)}") if v.strip() else None
     return out
 
 
@@ -144,10 +227,11 @@ def set_args(groups: Iterable[Iterable[str]] | None) -> list[str]:
 def _unknown_key(key: str, leaves: Mapping[str, Any], where: str) -> InputError:
     section = [k for k in leaves if k.startswith(key + ".")]
     if section:
-        return InputError(f"{where}: unknown config key {key!r} (a section; set one of its keys, e.g. {section[0]})")
-    close = difflib.get_close_matches(key, list(leaves), n=3, cutoff=0.5)
+        return InputError(f"{where}: unknown config key {short_repr(key)} (a section; set one of its keys, "
+                          f"e.g. {section[0]})")
+    close = difflib.get_close_matches(key, list(leaves), n=3, cutoff=0.5) if len(key) <= 200 else []
     hint = f"; did you mean {', '.join(close)}?" if close else ""
-    return InputError(f"{where}: unknown config key {key!r} (not in gsbench/configs/default.yaml){hint}")
+    return InputError(f"{where}: unknown config key {short_repr(key)} (not in gsbench/configs/default.yaml){hint}")
 
 
 _KINDS = ((bool, "bool"), (int, "int"), (float, "float"), (str, "str"), (list, "list"), (dict, "dict"))  # bool first
@@ -165,33 +249,42 @@ def check_value(key: str, value: Any, leaves: Mapping[str, Any], where: str) -> 
     """The value `key` takes from `value`, or an InputError naming the key and what it accepts.
 
     Type from the default (a bool only from true/false, a number only from a number; a whole float
-    such as 3e4 becomes an int for an integer key), then range or choices."""
+    such as 3e4 becomes an int for an integer key), then range or choices; a list's length, then each
+    element by the rule's `item`."""
     default = leaves.get(key, _NO_DEFAULT)
     if default is _NO_DEFAULT:
         raise _unknown_key(key, leaves, where)
     rule = RULES.get(key)
-    kind = _kind(default, rule)
+    return _checked(key, value, _kind(default, rule), rule, default, where)
+
+
+def _checked(key: str, value: Any, kind: Optional[str], rule: Optional[Rule], default: Any, where: str) -> Any:
+    """check_value's work for a key or a list element (`default` _NO_DEFAULT: an element)."""
     given = value
     if value is None:
         if default is None or (rule is not None and rule.nullable):
             return None
-        raise InputError(f"{where}: {key} cannot be null (default {default!r})")
+        was = "" if default is _NO_DEFAULT else f" (default {short_repr(default)})"
+        raise InputError(f"{where}: {key} cannot be null{was}")
     if kind == "bool" and not isinstance(value, bool):
-        raise InputError(f"{where}: {key} must be true/false, got {value!r}")
+        raise InputError(f"{where}: {key} must be true/false, got {short_repr(value)}")
     if kind in ("int", "float"):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InputError(f"{where}: {key} must be a number (default {default!r}), got {value!r}")
+            was = "" if default is _NO_DEFAULT else f" (default {short_repr(default)})"
+            raise InputError(f"{where}: {key} must be a number{was}, got {short_repr(value)}")
         if kind == "int" or (rule is not None and rule.integer):
             if isinstance(value, float) and not value.is_integer():
-                raise InputError(f"{where}: {key} must be a whole number, got {value!r}")
+                raise InputError(f"{where}: {key} must be a whole number, got {short_repr(value)}")
             value = int(value)
         else:
             value = float(value)
     expected = {"str": str, "list": list, "dict": dict}.get(kind or "")
     if expected is not None and not isinstance(value, expected):
-        raise InputError(f"{where}: {key} must be a {'mapping' if kind == 'dict' else kind}, got {value!r}")
+        raise InputError(f"{where}: {key} must be a {'mapping' if kind == 'dict' else kind}, got {short_repr(value)}")
     if rule is not None and not rule.admits(value):
-        raise InputError(f"{where}: {key}={given!r} is out of range: must be {rule.describe()}")
+        raise InputError(f"{where}: {key}={short_repr(given)} is out of range: must be {rule.describe()}")
+    if rule is not None and rule.item is not None and isinstance(value, list):
+        value = [_checked(f"{key}[{i}]", v, rule.item.kind, rule.item, _NO_DEFAULT, where) for i, v in enumerate(value)]
     return copy.deepcopy(value)
 
 
@@ -279,10 +372,29 @@ def validate(cfg: Mapping) -> None:
         check_value(key, value, leaves, "config")
 
 
+def run_config(data: Any, path: str | Path) -> dict:
+    """A run folder's config.json as read (`data`), checked for what loading the run needs: a mapping
+    naming a known method and the scene's path, whose sections are mappings. Not every key is checked
+    again: a run keeps the config it was trained with. Anything else is an InputError naming `path`."""
+    if not isinstance(data, dict):
+        kind = "null" if data is None else type(data).__name__
+        raise InputError(f"{path}: a run's config must be a JSON object, got {kind}")
+    method = data.get("method")
+    if not isinstance(method, str) or method not in METHODS:
+        raise InputError(f"{path}: method {short_repr(method)} is not a known method ({', '.join(METHODS)})")
+    scene = data.get("scene")
+    if not isinstance(scene, dict) or not isinstance(scene.get("path"), str):
+        raise InputError(f"{path}: no scene path (a run's config holds the scene it was trained on as scene.path)")
+    sections = [k for k, v in _default_tree().items() if isinstance(v, dict) and not isinstance(data.get(k, {}), dict)]
+    if sections:
+        raise InputError(f"{path}: section {sections[0]!r} must be a mapping")
+    return data
+
+
 def canonical(cfg: dict) -> dict:
     """The config as far as it decides what a run computes: without the keys that only say where things
-    are kept (NON_RESULT_KEYS), without bookkeeping (dropped, resolved, scene, run_id) and without
-    another method's own section. The one form both hashes below read."""
+    are kept (NON_RESULT_KEYS), without the NULL_DEFAULT_KEYS left null, without bookkeeping (dropped,
+    resolved, scene, run_id) and without another method's own section. The one form both hashes below read."""
     c = copy.deepcopy(cfg)
     for path in NON_RESULT_KEYS:
         d = c
@@ -290,6 +402,12 @@ def canonical(cfg: dict) -> dict:
             d = d.get(p, {})
         if isinstance(d, dict):
             d.pop(path[-1], None)
+    for *section, leaf in NULL_DEFAULT_KEYS:
+        d = c
+        for p in section:
+            d = d.get(p, {})
+        if isinstance(d, dict) and leaf in d and d[leaf] is None:
+            del d[leaf]
     for k in ("dropped", "resolved", "scene", "run_id"):
         c.pop(k, None)
     # another method's own section (a plugin's) does not change this run: an installed plugin leaves
@@ -329,6 +447,9 @@ __all__ = [
     "load_yaml",
     "set_args",
     "validate",
+    "run_config",
+    "load_yaml_file",
+    "short_repr",
     "preset_path",
     "default_tree",
     "flatten",

@@ -27,9 +27,17 @@ class Rule:
     kind: Optional[str] = None        # int | float | str | list: for keys whose default is null
     nullable: bool = False            # null is a valid value (keys with a null default always are)
     integer: bool = False             # a number that must be whole (an int default implies it)
+    length: Optional[tuple[int, int]] = None   # a list: its fewest and most elements
+    item: Optional["Rule"] = None     # a list: the rule of every element (its `kind` and range or choices)
 
     def describe(self) -> str:
         """The allowed values in words, for error messages and the docs."""
+        if self.length is not None:
+            low, high = self.length
+            count = str(low) if low == high else f"{low} to {high}"
+            item = self.item or Rule()
+            each = "" if item.describe() == "any value" else f", each {item.describe()}"
+            return f"a list of {count} {_PLURALS.get(item.kind or '', 'values')}{each}"
         if self.choices is not None:
             return "one of " + ", ".join("null" if c is None else str(c) for c in self.choices)
         lo = "" if self.low is None else (f"> {self.low:g}" if self.low_open else f">= {self.low:g}")
@@ -42,6 +50,8 @@ class Rule:
         """True when `value` (already of the right type) is inside the rule."""
         if value is None:
             return True
+        if self.length is not None and isinstance(value, list):
+            return self.length[0] <= len(value) <= self.length[1]   # the elements: by `item`, one by one
         if self.choices is not None:
             return value in self.choices
         if isinstance(value, (int, float)) and not isinstance(value, bool):
@@ -72,8 +82,14 @@ def one_of(*choices: Any, **kw: Any) -> Rule:
     return Rule(choices=tuple(choices), **kw)
 
 
+def list_of(item: Rule, shortest: int, longest: int) -> Rule:
+    """A list of `shortest` to `longest` elements, each of `item.kind` and inside `item`."""
+    return Rule(kind="list", length=(shortest, longest), item=item)
+
+
+_PLURALS = {"float": "numbers", "int": "whole numbers", "str": "strings"}   # a list's elements, in words
 BACKENDS = ("auto", "torch", "cpu", "gsplat")
-DEPTH_PROVIDERS = ("gt", "sparse", "depth-anything", "none")
+DEPTH_PROVIDERS = ("gt", "sparse", "sfm", "depth-anything", "none")
 MASK_PROVIDERS = ("simulated", "sam2", "gt")
 FEATURE_PROVIDERS = ("text-aligned", "openclip")
 PROPAGATORS = ("flow", "reproject")
@@ -99,12 +115,14 @@ RULES: dict[str, Rule] = {
     # training schedule
     "train.iterations": at_least(1),
     "train.holdout": one_of(*HOLDOUTS),
+    "train.views": at_least(1, kind="int", integer=True),   # null = every view the hold-out leaves
     "train.max_width": at_least(1, kind="int", integer=True),
     "train.data_on": one_of(*DATA_PLACES),
     "train.sh_degree": Rule(low=0, high=3),
     "train.sh_increase_every": at_least(0),
     "train.lr.color_rest_factor": positive(),
     "train.lambda_dssim": unit(),
+    "train.background": list_of(unit(kind="float"), 3, 3),   # RGB in [0, 1]
     "train.init.mode": one_of(*INIT_MODES),
     "train.init.num_random": at_least(1),
     "train.init.max_points": at_least(1, kind="int", integer=True),
@@ -143,17 +161,20 @@ RULES: dict[str, Rule] = {
     "priors.masks.severity": at_least(0),
     **{f"priors.masks.failures.{k}": at_least(0, kind="float") for k in ("merge", "split", "miss", "leak", "texture")},
     "priors.depth.distortion": at_least(0),
+    "priors.depth.working_size": Rule(low=16, high=4096, integer=True),  # px; the cap keeps the working image in memory
     "priors.masks.propagator": one_of(*PROPAGATORS),
     "priors.masks.checkpoint": Rule(kind="str"),
     "priors.masks.model_config": Rule(kind="str"),
     "priors.masks.min_iou": unit(),
     "priors.masks.new_objects": one_of(*NEW_OBJECT_RULES),
+    "priors.masks.model_overrides": list_of(Rule(kind="str"), 0, 64),   # hydra overrides of the SAM2 config
     "priors.features.provider": one_of(*FEATURE_PROVIDERS),
     "priors.features.checkpoint": Rule(kind="str"),
     "priors.features.noise": at_least(0),
     "priors.features.context": unit(),
     # GaussianDS
     "gaussiands.latent_dim": at_least(1),
+    "gaussiands.autoencoder.hidden": list_of(Rule(low=1, high=8192, kind="int", integer=True), 0, 16),
     "gaussiands.autoencoder.epochs": at_least(0),
     "gaussiands.autoencoder.lr": positive(),
     "gaussiands.depth_formulation": one_of(*DEPTH_FORMULATIONS),

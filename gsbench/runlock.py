@@ -8,12 +8,17 @@ commands started into one folder the second gets RunLockedError (an InputError: 
 naming the holder. The holder is stale, and its lock is taken over, when it ran on this host and
 its pid is dead or a zombie (a SIGKILLed process leaves its lock behind), or when it ran on another
 host and has not refreshed the lock for `stale_after_s` (the holder touches it every HEARTBEAT_S).
-Takeovers are made under an flock on a side file, so two processes never take over the same
-stale lock together. The same process may take a folder's lock again (a grid cell holds it for
-train + eval, and training inside takes it again): only the outermost release removes it.
+Takeovers are made under an flock on a side file (removed again, so neither a winner nor a loser
+leaves it behind), so two processes never take over the same stale lock together. The same
+process may take a folder's lock again (a grid cell holds it for train + eval, and training inside
+takes it again): only the outermost release removes it.
+
+The lock file may also sit beside the folder it guards (`lock_path`): an output folder that is
+swapped whole (gsbench.outdir) cannot hold its own lock.
 """
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import logging
@@ -24,10 +29,11 @@ import threading
 import time
 import uuid
 from pathlib import Path
-from typing import Optional
+from typing import Iterator, Optional
 
 from gsbench import rundir
 from gsbench.errors import InputError
+from gsbench.store import read_json
 
 log = logging.getLogger(__name__)
 
@@ -63,11 +69,45 @@ class RunLockedError(InputError):
 
 def read_holder(run_dir: str | os.PathLike) -> Optional[dict]:
     """The lock's holder record, or None when the folder is not locked (or the file is unreadable)."""
+    return _read_lock(Path(run_dir) / LOCK_FILE)
+
+
+def _read_lock(lock_path: Path) -> Optional[dict]:
     try:
-        data = json.loads((Path(run_dir) / LOCK_FILE).read_text(encoding="utf-8"))
+        data = read_json(lock_path)
     except (OSError, ValueError):
         return None
     return data if isinstance(data, dict) else None
+
+
+@contextlib.contextmanager
+def _flocked(guard: Path) -> Iterator[None]:
+    """An exclusive flock on `guard`, which is removed when released. A waiter that got the lock on
+    a file already removed (or replaced) opens the path again, so two holders never coexist."""
+    while True:
+        fd = os.open(guard, os.O_CREAT | os.O_RDWR, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            st = os.fstat(fd)
+            try:
+                now = os.stat(guard)
+                current = (now.st_ino, now.st_dev) == (st.st_ino, st.st_dev)
+            except FileNotFoundError:
+                current = False
+        except BaseException:
+            os.close(fd)
+            raise
+        if current:
+            break
+        os.close(fd)
+    try:
+        yield
+    finally:
+        try:
+            os.unlink(guard)
+        except FileNotFoundError:
+            pass
+        os.close(fd)
 
 
 def holder_is_stale(holder: dict, lock_path: Path, stale_after_s: float = STALE_AFTER_S) -> bool:
@@ -91,12 +131,15 @@ def describe(holder: dict) -> str:
 
 
 class RunLock:
-    """Context manager holding RUN_DIR/writer.lock for this process."""
+    """Context manager holding RUN_DIR/writer.lock (or `lock_path`) for this process; `what` names
+    the folder in the error a second writer gets (run folder, runs folder, report folder)."""
 
     def __init__(self, run_dir: str | os.PathLike, command: Optional[str] = None,
-                 stale_after_s: float = STALE_AFTER_S) -> None:
+                 stale_after_s: float = STALE_AFTER_S, lock_path: Optional[Path] = None,
+                 what: str = "run folder") -> None:
         self.run_dir = Path(run_dir)
-        self.path = self.run_dir / LOCK_FILE
+        self.path = Path(lock_path) if lock_path is not None else self.run_dir / LOCK_FILE
+        self.what = what
         self.command = command or " ".join([Path(sys.argv[0]).name] + sys.argv[1:])
         self.stale_after_s = stale_after_s
         self.token = uuid.uuid4().hex
@@ -121,35 +164,33 @@ class RunLock:
 
     def _take_over_if_stale(self) -> Optional[dict]:
         """Replace a stale lock by ours (under an flock, re-checking); returns the holder or None."""
-        guard = self.run_dir / (LOCK_FILE + ".takeover")
-        with open(guard, "a") as g:
-            fcntl.flock(g.fileno(), fcntl.LOCK_EX)
-            holder = read_holder(self.run_dir)
+        with _flocked(self.path.with_name(self.path.name + ".takeover")):
+            holder = _read_lock(self.path)
             if holder is None and not self.path.exists():
                 return {} if self._create() else None
             if holder is not None and not holder_is_stale(holder, self.path, self.stale_after_s):
                 return None
-            tmp = self.run_dir / f".{LOCK_FILE}.{self.token}"
+            tmp = self.path.with_name(f".{self.path.name}.{self.token}")
             tmp.write_bytes(self._record())
             os.replace(tmp, self.path)
             return holder or {"note": "unreadable lock file"}
 
     def acquire(self) -> "RunLock":
-        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
         key = str(self.path.resolve())
         with _held_guard:
             if _held.get(key):
                 _held[key] += 1
                 return self
         if not self._create():
-            holder = read_holder(self.run_dir)
+            holder = _read_lock(self.path)
             if holder and holder.get("pid") == os.getpid() and holder.get("host") == socket.gethostname():
                 self.token = holder.get("token", self.token)      # ours, from an earlier unreleased lock
             else:
                 took = self._take_over_if_stale()
                 if took is None:
-                    holder = read_holder(self.run_dir) or {}
-                    raise RunLockedError(f"{self.run_dir}: another process is writing this run folder: "
+                    holder = _read_lock(self.path) or {}
+                    raise RunLockedError(f"{self.run_dir}: another process is writing this {self.what}: "
                                          f"{describe(holder)}; wait for it or remove {self.path} if it is gone")
                 if took:
                     self.took_over = took
@@ -178,7 +219,7 @@ class RunLock:
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
-        holder = read_holder(self.run_dir)
+        holder = _read_lock(self.path)
         if holder is not None and holder.get("token") == self.token:
             try:
                 self.path.unlink()

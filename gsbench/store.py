@@ -18,6 +18,7 @@ gsbench/studies.py.
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import tempfile
@@ -28,6 +29,8 @@ from typing import Any
 import numpy as np
 
 from gsbench.errors import InputError
+
+log = logging.getLogger(__name__)
 
 
 def _json_default(o: Any):
@@ -64,7 +67,10 @@ def _clean(obj: Any) -> Any:
 
 
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
-    """Write `data` to `path` atomically (temp file in the same folder, fsync, rename)."""
+    """Write `data` to `path` atomically (temp file in the same folder, fsync, rename).
+
+    An OSError that names no file (a write or fsync failing with EFBIG, ENOSPC, EIO) is given `path`,
+    so the one-line error says which file could not be written."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -74,11 +80,13 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(e, OSError) and e.filename is None:
+            e.filename = str(path)
         raise
 
 
@@ -92,19 +100,73 @@ def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
     write_text_atomic(path, text + "\n")
 
 
-def read_json(path: str | os.PathLike) -> Any:
-    """Read JSON; a missing, truncated or corrupt file is an InputError naming the file."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: file not found") from None
-    except OSError as e:
-        raise InputError(f"{path}: cannot read ({e.strerror})") from None
+# Budgets of every JSON file gsbench reads (run folders, labels, scene files may come from elsewhere):
+# the largest real ones are a few MB and 6 levels deep; Python's parser and the code walking the result
+# recurse once per level, so a deeper document would end in a RecursionError instead of a message.
+MAX_JSON_BYTES = 64 * 1024 * 1024
+MAX_JSON_DEPTH = 64
+_NOT_MARK = bytes(b for b in range(256) if b not in b'[]{}"')    # all bytes but brackets and quotes
+
+
+def json_depth(text: str) -> int:
+    """How deep the brackets of a JSON text nest, counted without parsing (so without recursion):
+    escaped backslashes and quotes go first, then everything but brackets and quotes, then what
+    stood between quotes (brackets inside strings do not nest). A fraction of json.loads' time."""
+    body = text.encode("utf-8", "replace")
+    if b"\\" in body:
+        body = body.replace(b"\\\\", b"").replace(b'\\"', b"")
+    brackets = b"".join(body.translate(None, _NOT_MARK).split(b'"')[::2])
+    if not brackets:
+        return 0
+    codes = np.frombuffer(brackets, dtype=np.uint8)
+    steps = ((codes == ord("[")) | (codes == ord("{"))).astype(np.int32) * 2 - 1
+    return int(np.cumsum(steps).max())
+
+
+def check_json_budget(text: str, where: str) -> None:
+    """Refuse a JSON text over MAX_JSON_BYTES or nested deeper than MAX_JSON_DEPTH, naming `where` and
+    the limit (never the text)."""
+    if len(text) > MAX_JSON_BYTES:
+        raise InputError(f"{where}: refused: {len(text)} characters of JSON, more than the "
+                         f"{MAX_JSON_BYTES // 2**20} MiB gsbench reads")
+    if json_depth(text) > MAX_JSON_DEPTH:
+        raise InputError(f"{where}: refused: JSON nested deeper than {MAX_JSON_DEPTH} levels")
+
+
+def parse_json(text: str, where: str) -> Any:
+    """The one JSON parser: json.loads within the budgets; a bad text is an InputError naming `where`."""
+    check_json_budget(text, where)
     try:
         return json.loads(text)
     except json.JSONDecodeError as e:
-        raise InputError(f"{path}: corrupt or truncated JSON ({e.msg} at line {e.lineno})") from None
+        raise InputError(f"{where}: corrupt or truncated JSON ({e.msg} at line {e.lineno})") from None
+    except RecursionError:    # the depth check comes first; kept so that no parse ends in a traceback
+        raise InputError(f"{where}: refused: JSON nested too deep") from None
+
+
+def read_text_bounded(path: Path, max_bytes: int, kind: str) -> str:
+    """A UTF-8 text file, refused before reading when it is larger than `max_bytes` (the one bounded
+    reader of JSON and YAML files). A missing file is FileNotFoundError naming it; anything else that
+    stops the read is an InputError naming the file."""
+    try:
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise InputError(f"{path}: refused: {size} bytes, more than the {max_bytes // 2**20} MiB "
+                             f"of {kind} gsbench reads")
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: file not found") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: corrupt {kind} (not UTF-8 text)") from None
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror})") from None
+
+
+def read_json(path: str | os.PathLike) -> Any:
+    """Read JSON; a missing file is a FileNotFoundError, a truncated, corrupt, too large or too deeply
+    nested one an InputError naming the file."""
+    path = Path(path)
+    return parse_json(read_text_bounded(path, MAX_JSON_BYTES, "JSON"), str(path))
 
 
 def append_jsonl(path: str | os.PathLike, obj: Any) -> None:
@@ -117,14 +179,21 @@ def append_jsonl(path: str | os.PathLike, obj: Any) -> None:
 
 
 def read_jsonl(path: str | os.PathLike) -> list[dict]:
-    """All complete lines of a JSONL file; an incomplete trailing line is ignored."""
+    """All complete lines of a JSONL file; an incomplete or corrupt line is skipped (a crash mid-write
+    tears the last one), a line over the JSON budgets too, with a warning. A file over MAX_JSON_BYTES
+    is an InputError naming it."""
     out = []
     path = Path(path)
     if not path.exists():
         return out
-    for line in path.read_text(encoding="utf-8").splitlines():
+    for i, line in enumerate(read_text_bounded(path, MAX_JSON_BYTES, "JSON").splitlines(), 1):
         line = line.strip()
         if not line:
+            continue
+        try:
+            check_json_budget(line, f"{path} line {i}")
+        except InputError as e:
+            log.warning("%s; line skipped", e)
             continue
         try:
             out.append(json.loads(line))

@@ -20,6 +20,14 @@ containing the last row/column (an off-by-one in the reference kept for comparab
 bincount). Where the window is empty (H or W = 1) the pixel keeps its value.
 
 Missing predictions and empty GT are never dropped silently: see `evaluate_lerf_scene`.
+
+The empty-class rule (EMPTY_GT_RULE) follows LangSplat's evaluation (eval/evaluate_iou_loc.py): each
+frame is queried only with the categories of its own label file (`set_positives(list(img_ann))`), so
+a query absent from a frame's GT is never asked there; the caller builds the pairs the same way. An
+empty GT mask can still occur (a polygon outside the image, or one that vanishes on a smaller grid);
+the reference then computes |P & G| / |P | G| as it stands: 0 when the prediction marks a pixel, and
+0 / 0 = NaN when it is empty too, which turns its scene mean into NaN. gsbench scores that last case
+EMPTY_UNION_IOU = 1 (the one deviation) and marks the pair `empty_gt`.
 """
 from __future__ import annotations
 
@@ -41,6 +49,7 @@ LERF_THRESHOLD = 0.7
 LERF_SMOOTH_RADIUS = 3
 MISSING_POLICIES = ("error", "skip", "zero")
 LERF_IMPL = "lerf-ovs/langsplat/v2"   # v2: empty-GT pairs counted (EMPTY_GT_RULE)
+EMPTY_UNION_IOU = 1.0   # IoU of a pair whose GT and prediction are both empty (the reference: NaN)
 EMPTY_GT_RULE = "an empty GT mask is scored |P & G| / |P | G| (0 unless the prediction is empty too, then 1)"
 LERF_REFERENCE_WIDTH = 985    # width of the LERF-OVS label images the 30 px / 7 px kernels were made for
 LERF_KERNEL_MODES = ("reference", "auto")
@@ -291,7 +300,7 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
             skipped.append({"frame": p.frame, "query": p.query, "reason": "no GT mask"})
         else:
             pred = lerf_mask(blended[lvl], threshold=threshold, window=window, radius=kernels.radius)
-            entry["iou"] = iou(pred, gt, empty=1.0)
+            entry["iou"] = iou(pred, gt, empty=EMPTY_UNION_IOU)
             if not gt.any():
                 entry["empty_gt"] = True
             ious.append(entry["iou"])

@@ -4,9 +4,15 @@ Prediction: per pixel, argmax over the scene's classes of cos(feature, text_c); 
 class, no threshold (`ovs3d_predict`). GT: one binary mask per class (foreground where the PNG
 is 255), resized to the evaluation resolution by centre sampling (`resize_nearest`, as PIL NEAREST).
 
-Per (view, class): IoU = |P_c & G_c| / |P_c | G_c| with 0 when the union is empty (the
-reference's rule), and Boundary IoU with the same empty rule. A class without a GT mask in a
-view counts as an empty GT mask (every scene class is scored in every view).
+Per (view, class): IoU = |P_c & G_c| / |P_c | G_c|, and Boundary IoU, for every class of the scene
+in every view. The empty-class rule (EMPTY_GT_RULE) is the reference's: the 3D-OVS code
+(Kunhao-Liu/3D-OVS, renderer.py `evaluation_segmentation_test`) scores each view with scikit-learn's
+`jaccard_score(gt, one_hot, average=None)` over all classes, whose default `zero_division` gives 0
+(with a warning) when GT and prediction of a class are both empty, and averages every (view, class)
+value with np.mean. So a class absent from a view's GT scores 0 whether or not the prediction marks
+it; nothing is skipped. The reference's reader needs a mask file per class and view; gsbench counts a
+class without a file as an empty GT. The pairs with an empty GT are listed per view (`empty_gt`,
+and `empty_both` for those whose prediction is empty too), so such zeros are never hidden.
 mIoU / mBIoU = plain mean over views x classes.
 Pixel accuracy, two named rules (`pixel_accuracy`): "reference" (pixel_acc_3dovs), exact
 one-hot match over all H x W pixels as the reference scores it; "labelled"
@@ -27,6 +33,9 @@ from .segmentation import BOUNDARY_DILATION_RATIO, boundary_iou, iou
 
 OVS3D_IMPL = "3dovs/argmax-cos/v1"
 MISSING_POLICIES = ("error", "skip", "zero")
+EMPTY_UNION_IOU = 0.0   # IoU and BIoU of a class whose GT and prediction are both empty (the reference's)
+EMPTY_GT_RULE = ("every class is scored in every view; an empty GT mask scores IoU 0, also when the prediction "
+                 "is empty (the 3D-OVS reference: sklearn jaccard_score, zero_division 0)")
 
 
 def ovs3d_predict(pixel_features: Any, class_embeddings: Any, *, pixel_norms: np.ndarray | None = None) -> np.ndarray:
@@ -92,7 +101,8 @@ def ovs3d_view_metrics(pred_labels: Any, gt_masks: Mapping[str, Any], class_name
 
     pred_labels: (H, W) class indices into `class_names`; gt_masks: class name -> mask (any
     resolution, resized NEAREST to H x W); classes absent from the dict have an empty GT.
-    Returns {"iou": {class: v}, "biou": {class: v}, "pixel_acc": float | None, "gt_pixels": int}.
+    Returns {"iou": {class: v}, "biou": {class: v}, "pixel_acc": float | None, "gt_pixels": int,
+    "empty_gt": [classes with an empty GT], "empty_both": [those whose prediction is empty too]}.
     """
     pred = to_numpy(pred_labels, "pred_labels")
     if pred.ndim != 2 or not np.issubdtype(pred.dtype, np.integer):
@@ -106,17 +116,21 @@ def ovs3d_view_metrics(pred_labels: Any, gt_masks: Mapping[str, Any], class_name
     if unknown:
         raise InputError(f"gt_masks: classes not in class_names: {sorted(unknown)}")
     h, w = pred.shape
-    ious, bious = {}, {}
+    ious, bious, empty_gt, empty_both = {}, {}, [], []
     stack = np.zeros((n, h, w), dtype=bool)
     for c, name in enumerate(class_names):
         if name in gt_masks:
             stack[c] = resize_nearest(as_mask(gt_masks[name], f"gt mask {name!r}"), w, h)
         p = pred == c
-        ious[name] = iou(p, stack[c], empty=0.0)
-        bious[name] = boundary_iou(p, stack[c], dilation_ratio=dilation_ratio, empty=0.0)
+        ious[name] = iou(p, stack[c], empty=EMPTY_UNION_IOU)
+        bious[name] = boundary_iou(p, stack[c], dilation_ratio=dilation_ratio, empty=EMPTY_UNION_IOU)
+        if not stack[c].any():
+            empty_gt.append(name)
+            if not p.any():
+                empty_both.append(name)
     return {"iou": ious, "biou": bious, "pixel_acc": pixel_accuracy(pred, stack, "reference"),
             "pixel_acc_labelled": pixel_accuracy(pred, stack, "labelled"),
-            "gt_pixels": int(np.count_nonzero(stack.any(axis=0)))}
+            "gt_pixels": int(np.count_nonzero(stack.any(axis=0))), "empty_gt": empty_gt, "empty_both": empty_both}
 
 
 @dataclass
@@ -134,12 +148,13 @@ class Ovs3dSceneResult:
     mbiou: float | None
     pixel_acc: float | None    # rule "reference"
     pixel_acc_labelled: float | None
-    per_view: list[dict]       # {view, miou, mbiou, pixel_acc, iou: {class: v}, biou: {class: v}}
+    per_view: list[dict]       # {view, miou, mbiou, pixel_acc, iou: {class: v}, biou: {class: v}, empty_gt, empty_both}
     skipped: list[dict]        # {view, reason}
     n_views: int
     missing: str
     impl: str = OVS3D_IMPL
     params: dict = field(default_factory=dict)
+    empty_both: int = 0        # (view, class) pairs with an empty GT and an empty prediction, each scored 0
 
 
 def evaluate_ovs3d_scene(views: Sequence[Ovs3dView], class_names: Sequence[str], *, missing: str = "error",
@@ -166,7 +181,8 @@ def evaluate_ovs3d_scene(views: Sequence[Ovs3dView], class_names: Sequence[str],
                 continue
             skipped.append({"view": v.name, "reason": "missing prediction, scored 0"})
             zeros = {c: 0.0 for c in class_names}
-            m = {"iou": zeros, "biou": dict(zeros), "pixel_acc": 0.0, "pixel_acc_labelled": 0.0}
+            m = {"iou": zeros, "biou": dict(zeros), "pixel_acc": 0.0, "pixel_acc_labelled": 0.0,
+                 "empty_gt": [], "empty_both": []}
         else:
             m = ovs3d_view_metrics(v.pred_labels, v.gt_masks, class_names, dilation_ratio=dilation_ratio)
         vi = [m["iou"][c] for c in class_names]
@@ -180,10 +196,11 @@ def evaluate_ovs3d_scene(views: Sequence[Ovs3dView], class_names: Sequence[str],
             accs_lab.append(m["pixel_acc_labelled"])
         per_view.append({"view": v.name, "miou": mean_or_none(vi), "mbiou": mean_or_none(vb),
                          "pixel_acc": m["pixel_acc"], "pixel_acc_labelled": m["pixel_acc_labelled"],
-                         "iou": m["iou"], "biou": m["biou"]})
+                         "iou": m["iou"], "biou": m["biou"], "empty_gt": m["empty_gt"], "empty_both": m["empty_both"]})
     return Ovs3dSceneResult(miou=mean_or_none(all_iou), mbiou=mean_or_none(all_biou),
                             pixel_acc=mean_or_none(accs), pixel_acc_labelled=mean_or_none(accs_lab),
                             per_view=per_view, skipped=skipped,
                             n_views=len(views), missing=missing,
-                            params={"dilation_ratio": dilation_ratio, "empty_union": 0.0,
-                                    "gt_resize": "nearest-centre"})
+                            params={"dilation_ratio": dilation_ratio, "empty_union": EMPTY_UNION_IOU,
+                                    "empty_gt_rule": EMPTY_GT_RULE, "gt_resize": "nearest-centre"},
+                            empty_both=sum(len(v["empty_both"]) for v in per_view))

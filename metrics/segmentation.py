@@ -4,8 +4,9 @@ Masks are 2-D arrays or tensors; non-bool input counts non-zero as foreground.
 
 Empty unions are defined, never 0/0: `iou` and `boundary_iou` return `empty` when both masks
 (or both bands) are empty. The default `empty=1.0` (two masks that agree there is nothing agree
-perfectly); the 3D-OVS protocol passes `empty=0.0` because its reference scores an empty union
-as 0.
+perfectly). Each protocol passes its own rule, stated with the reference's code in its module:
+`ovs3d.EMPTY_UNION_IOU` = 0 (the 3D-OVS reference, scikit-learn's `jaccard_score` with its default
+`zero_division`) and `lerf.EMPTY_UNION_IOU` = 1 (LangSplat's evaluation divides 0 by 0 there).
 
 Boundary band (Boundary IoU reference recipe, Cheng et al. 2021):
   d = max(1, round(ratio * sqrt(H^2 + W^2)))            (Python round, ratio 0.02 default)

@@ -3,18 +3,24 @@
 Inputs are the collected long table (gsbench.collect), the train_log.jsonl of the runs it lists
 (time curves, loss shares), and their results.json for the training budget when the collected
 table does not carry it.
+
+The report folder is written whole (gsbench.outdir): into a staging folder beside it, swapped in
+when complete, with a manifest of its files; a folder holding files the report did not write is
+refused (or, with force, they are kept), and of the old report only its own files are deleted.
 """
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import pandas as pd
 
 from gsbench.collect import collect, read_collected, write_collected
 from gsbench.errors import InputError
+from gsbench.outdir import OwnedFolder
 from gsbench.reports import doseplots, plots, shares
 from gsbench.reports import html as html_mod
 from gsbench.reports import pictures as pictures_mod
@@ -59,6 +65,14 @@ class ReportSummary:
     collected: Path | None = None
     unreadable: int = 0          # results.json files that could not be read (each a failed run row)
 
+    def rebased(self, old: Path, new: Path) -> "ReportSummary":
+        """The same summary with the paths under `old` (the staging folder) moved to `new`."""
+        def move(p: Path) -> Path:
+            return new / p.relative_to(old)
+        return dataclasses.replace(self, out_dir=new, index=move(self.index), plots=[move(p) for p in self.plots],
+                                   pictures=[move(p) for p in self.pictures],
+                                   collected=move(self.collected) if self.collected else None)
+
 
 def _writer_version() -> str:
     try:
@@ -85,20 +99,27 @@ def _section_of(table_id: str) -> str:
     return "main"
 
 
-def build_report(source: str | Path, out_dir: str | Path, progress: bool = False) -> ReportSummary:
-    """Build the report for a runs folder (or a collected table) into out_dir."""
-    out_dir = Path(out_dir)
+def build_report(source: str | Path, out_dir: str | Path, progress: bool = False,
+                 force: bool = False) -> ReportSummary:
+    """Build the report for a runs folder (or a collected table) into out_dir, whole (module docstring).
+    `force`: write into a folder that holds files the report did not write, keeping them."""
+    with OwnedFolder(out_dir, "gsbench report", force=force, what="report folder") as folder:
+        assert folder.staging is not None
+        staging = folder.staging
+        summary = _write_report(source, staging, progress)
+        folder.commit()
+    return summary.rebased(staging, folder.out)
+
+
+def _write_report(source: str | Path, out_dir: Path, progress: bool) -> ReportSummary:
+    """Every file of the report, into the empty folder out_dir."""
     df, src = load_results(source)
     if df.empty:
         raise InputError(f"{source}: no results to report")
-    out_dir.mkdir(parents=True, exist_ok=True)
     plot_dir = out_dir / "plots"
     table_dir = out_dir / "tables"
-    plot_dir.mkdir(exist_ok=True)
-    table_dir.mkdir(exist_ok=True)
-    # a re-run must not leave figures / tables of studies that are gone (only our own file kinds)
-    for stale in [*plot_dir.glob("*.png"), *table_dir.glob("*.md"), *table_dir.glob("*.tex")]:
-        stale.unlink()
+    plot_dir.mkdir()
+    table_dir.mkdir()
     summary = ReportSummary(out_dir=out_dir, index=out_dir / "index.html")
     summary.unreadable = len(df.attrs.get("unreadable", []))
     if summary.unreadable:
@@ -135,10 +156,30 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
                     (p.relative_to(out_dir).as_posix(), f"{t.title}: bars per row; error bars = std over seeds.")
                 )
 
-    # error against run time, one figure per study
     studies = res.studies()
-    groups: list[tuple[str, Any, list[str]]] = []
     main_ids = res.run_ids(study=MAIN_STUDIES)
+    _study_figures(res, studies, main_ids, plot_dir, out_dir, section, summary)
+    _extra_figures(res, plot_dir, out_dir, section, summary)
+    summary.notes += _absence_notes(res, tables, studies, main_ids)
+
+    block, pictures = pictures_mod.pictures_html(res, out_dir, summary.notes)
+    if block:
+        section("pictures").blocks.append(block)
+        summary.pictures = pictures
+    order = ["main", "pictures", "budgets", "claims"] + [k for k in STUDIES if k != "reconstruction"]
+    ordered = [sections[k] for k in order if k in sections] + [s for k, s in sections.items() if k not in order]
+    links = [("tables.md", "tables (Markdown)"), ("tables.tex", "tables (LaTeX)"),
+             (summary.collected.name, f"collected results ({summary.collected.suffix[1:]})")]
+    generated = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    html_mod.write_index(summary.index, "gsbench report", src, generated, ordered, summary.notes, res, links,
+                         _writer_version())
+    return summary
+
+
+def _study_figures(res: Results, studies: Any, main_ids: list[str], plot_dir: Path, out_dir: Path,
+                   section: Callable[[str], html_mod.Section], summary: ReportSummary) -> None:
+    """Error against run time and loss shares, one figure each per study (the main runs as one)."""
+    groups: list[tuple[str, Any, list[str]]] = []
     if main_ids:
         groups.append(("main", None, main_ids))
     for st in sorted(s for s in studies if s not in MAIN_STUDIES):
@@ -174,6 +215,10 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
                                 "Loss shares: each weighted loss term's share of the total loss over training steps "
                                 "(train_log.jsonl loss_share), one panel per configuration, mean over its seeds (n)."))
 
+
+def _extra_figures(res: Results, plot_dir: Path, out_dir: Path, section: Callable[[str], html_mod.Section],
+                   summary: ReportSummary) -> None:
+    """The study-specific figures: lambda surfaces, noise, latent d, dose response."""
     for p in plots.plot_lambda_surfaces(res, plot_dir / "lambda_surfaces"):
         summary.plots.append(p)
         section("lambda_grid").figures.append(
@@ -203,7 +248,10 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
              "Dose response: mean over seeds and its 95 % band against the swept value; dashed line / crosses = "
              "the paper's setting or its reported values."))
 
-    # what is absent
+
+def _absence_notes(res: Results, tables: list[Table], studies: Any, main_ids: list[str]) -> list[str]:
+    """What is absent and why, each table's notes, and the long n/a reasons in full."""
+    notes: list[str] = []
     absent = []
     if not main_ids:
         absent.append("main results (standalone / reconstruction runs)")
@@ -211,31 +259,19 @@ def build_report(source: str | Path, out_dir: str | Path, progress: bool = False
         if st != "reconstruction" and st not in studies:
             absent.append(st)
     if absent:
-        summary.notes.append("No runs for: " + ", ".join(absent) + " (their tables and plots are left out).")
-    if main_ids and not any(t.startswith(("reconstruction", "lerf_", "3dovs_")) for t in summary.tables):
-        summary.notes.append("Main runs exist but carry none of the reconstruction / segmentation metrics.")
+        notes.append("No runs for: " + ", ".join(absent) + " (their tables and plots are left out).")
+    if main_ids and not any(t.id.startswith(("reconstruction", "lerf_", "3dovs_")) for t in tables):
+        notes.append("Main runs exist but carry none of the reconstruction / segmentation metrics.")
     unknown = sorted(s for s in studies if s not in MAIN_STUDIES and s not in STUDIES)
     if unknown:
-        summary.notes.append("Studies without a paper layout (generic table by grid axis): "
-                             + ", ".join(map(str, unknown)) + ".")
+        notes.append("Studies without a paper layout (generic table by grid axis): "
+                     + ", ".join(map(str, unknown)) + ".")
     for t in tables:
-        summary.notes += [f"{t.title}: {n}" for n in t.notes]
+        notes += [f"{t.title}: {n}" for n in t.notes]
     for short, full in sorted(res.long_reasons.items()):
         for f in sorted(full)[:5]:
-            summary.notes.append(f"n/a ({short}) in full: {f}")
-
-    block, pictures = pictures_mod.pictures_html(res, out_dir, summary.notes)
-    if block:
-        section("pictures").blocks.append(block)
-        summary.pictures = pictures
-    order = ["main", "pictures", "budgets", "claims"] + [k for k in STUDIES if k != "reconstruction"]
-    ordered = [sections[k] for k in order if k in sections] + [s for k, s in sections.items() if k not in order]
-    links = [("tables.md", "tables (Markdown)"), ("tables.tex", "tables (LaTeX)"),
-             (summary.collected.name, f"collected results ({summary.collected.suffix[1:]})")]
-    generated = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    html_mod.write_index(summary.index, "gsbench report", src, generated, ordered, summary.notes, res, links,
-                         _writer_version())
-    return summary
+            notes.append(f"n/a ({short}) in full: {f}")
+    return notes
 
 
 def build_tables(res: Results) -> list[Table]:

@@ -12,7 +12,6 @@ import html
 import io
 import logging
 import math
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
@@ -269,10 +268,8 @@ def _provenance(runs: list[PictureRun]) -> str:
 
 
 def pictures_html(res: Results, out_dir: Path, notes: list[str]) -> tuple[str, list[Path]]:
-    """The pictures section's HTML and the PNGs it placed; '' when no main run saved previews."""
-    root = out_dir / PICTURES_DIR
-    if root.exists():   # a re-run must not keep pictures of runs that are gone
-        shutil.rmtree(root)
+    """The pictures section's HTML and the PNGs it placed under out_dir (a new report folder, so no
+    picture of a run that is gone survives); '' when no main run saved previews."""
     runs = picture_runs(res, notes)
     if not runs:
         return "", []

@@ -13,6 +13,7 @@ from gsbench import grids
 from gsbench.config import parse_overrides, set_args
 from gsbench.errors import InputError
 from gsbench.grids.executors import make_executor
+from gsbench.grids.runs_folder import owned_runs_folder
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,6 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--status", action="store_true", help="print the state of every cell and exit")
     parser.add_argument("--dry-run", action="store_true", help="list the cells (and their run ids) without running")
     parser.add_argument("--list", action="store_true", help="list the shipped grids")
+    parser.add_argument("--force", action="store_true",
+                        help="use an --out folder that holds files gsbench did not write there (they are left alone)")
     parser.add_argument("--no-shared-priors", action="store_true",
                         help="do not compute priors shared by several cells once before the cells run")
     parser.add_argument("--no-progress", action="store_true")
@@ -79,12 +82,13 @@ def run(args: argparse.Namespace) -> int:
              "cpus_per_task": args.cpus_per_task, "gpus_per_node": args.gpus_per_node}
     if args.cluster != "slurm":
         slurm = {k: v for k, v in slurm.items() if not k.startswith("slurm_")}
-    executor = make_executor(args.executor, jobs=args.jobs, folder=args.out / ".submitit", cluster=args.cluster,
-                             progress=not args.no_progress, **slurm)
     from concurrent.futures.process import BrokenProcessPool
     try:
-        report = grids.run_grid(grid, args.out, executor, retry_failed=args.retry_failed,
-                                share_priors=not args.no_shared_priors, log=print)
+        with owned_runs_folder(args.out, "gsbench ablate", force=args.force):   # one writer; refuses foreign files
+            executor = make_executor(args.executor, jobs=args.jobs, folder=args.out / ".submitit",
+                                     cluster=args.cluster, progress=not args.no_progress, **slurm)
+            report = grids.run_grid(grid, args.out, executor, retry_failed=args.retry_failed,
+                                    share_priors=not args.no_shared_priors, log=print)
     except BrokenProcessPool as e:
         print(f"gsbench ablate: a worker process died ({e}); finished cells are saved, re-run to resume "
               "the others (see --status)", file=sys.stderr)

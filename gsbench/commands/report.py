@@ -13,7 +13,10 @@ from gsbench.errors import InputError
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs_dir", type=Path,
                         help="runs folder (collected now), or a collected.parquet / collected.csv file")
-    parser.add_argument("--out", type=Path, required=True, help="report folder (index.html, tables/, plots/)")
+    parser.add_argument("--out", type=Path, required=True,
+                        help="report folder (index.html, tables/, plots/): new, empty or an earlier report")
+    parser.add_argument("--force", action="store_true",
+                        help="write into a folder that holds files the report did not write; they are kept")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--print", dest="print_tables", nargs="+", metavar="TABLE_ID", default=[],
                         help="print these tables (Markdown) after building, e.g. paper_claims loss_subsets_diff")
@@ -22,7 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from gsbench.reports.build import build_report  # lazy: start-up (cli loads all commands)
 
-    summary = build_report(args.runs_dir, args.out, progress=not args.no_progress)
+    summary = build_report(args.runs_dir, args.out, progress=not args.no_progress, force=args.force)
     unknown = [t for t in args.print_tables if t not in summary.tables]
     if unknown:
         raise InputError(f"{args.runs_dir}: no table {', '.join(unknown)} in this report "

@@ -1,5 +1,5 @@
 """Ground truth for the segmentation protocols: LERF label files -> masks and boxes, 3D-OVS class
-masks, and the mask-PNG reader of prediction folders."""
+masks and their PNG reader. (Predicted mask files are read by `mask_files`.)"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -67,16 +67,8 @@ def class_masks(scene, i: int, classes: list[str], width: int, height: int) -> O
     return {c: gt == k for k, c in enumerate(classes)}
 
 
-def check_aspect(path: Path, pw: int, ph: int, w: int, h: int, what: str) -> None:
-    """A prediction may be scored at another size than the GT, not at another aspect ratio: the GT
-    resized to it would be stretched. One pixel of rounding per side is allowed (as in a floor /
-    round of w*s x h*s)."""
-    if abs(pw * h - ph * w) > w + h:
-        raise InputError(f"{path}: prediction size {pw}x{ph} has another aspect ratio than {what} ({w}x{h})")
-
-
 def read_mask(path: Path) -> np.ndarray:
-    """First channel of a mask PNG as stored."""
+    """First channel of a GT mask PNG as stored (3D-OVS GT: 255 = the class)."""
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(f"{path}: cannot read the image")

@@ -10,7 +10,9 @@ from pathlib import Path
 from typing import Any, Optional
 
 from gsbench import rundir
+from gsbench.datasets.splits import split_record
 from gsbench.environment import PeakMemory, env_info
+from gsbench.errors import InputError
 from gsbench.metric_table import ORDERING_METRICS, SEG_BASES, seg_metric
 from gsbench.metrics import ordering as MO
 from gsbench.results import run_results
@@ -148,7 +150,8 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
     results = run_results(identity=identity, metrics=out.metrics, metric_impl=out.metric_impl,
                           skipped=out.skipped, per_view=out.per_view,
                           view_names=out.frames.get("reconstruction", []), frames=out.frames,
-                          frames_skipped=frames_skipped, resolution=out.resolution, notes=out.notes,
+                          frames_skipped=frames_skipped, split=split_record(scene, config),
+                          resolution=out.resolution, notes=out.notes,
                           timings=out.timings, memory=_memory(summary, peaks.read()), machine=env_info(),
                           status=state if state in ("done", "failed", "nonfinite") else "done",
                           train_device=(summary.get("info") or {}).get("device"),
@@ -160,7 +163,10 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
 
 def _cell_field(run_dir: Path, key: str) -> Any:
     p = run_dir / rundir.CELL
-    return read_json(p).get(key) if p.exists() else None
+    cell = read_json(p) if p.exists() else None
+    if cell is not None and not isinstance(cell, dict):
+        raise InputError(f"{p}: expected a JSON object, got {type(cell).__name__}")
+    return cell.get(key) if cell is not None else None
 
 
 def segmentation_metrics(method, scene, view_ids: list[int], cams: list, config: dict) -> tuple[dict, dict]:

@@ -19,7 +19,8 @@ def write_failed_results(spec: dict, run_dir: Path, status: dict) -> dict:
     config = spec.get("config") or {}
     try:
         if cfg_path.exists():
-            config = read_json(cfg_path)
+            read = read_json(cfg_path)
+            config = read if isinstance(read, dict) else config   # null or a list: keep the cell's own
     except ValueError:
         pass
     scene_name, protocols = None, []

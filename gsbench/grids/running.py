@@ -119,9 +119,17 @@ def classify(planned: list[PlannedCell]) -> dict[str, str]:
 def run_grid(grid: Grid, runs_dir: Path, executor: Any, retry_failed: bool = False,
              log: Callable[[str], None] = log_.info, share_priors: bool = True) -> GridReport:
     """Plan the grid, skip finished cells, compute shared priors once, dispatch the remaining cells
-    through `executor` (anything with `map(fn, items) -> list`), and return what happened."""
+    through `executor` (anything with `map(fn, items) -> list`), and return what happened.
+
+    Holds RUNS_DIR's writer lock throughout: a second grid into the same folder fails at once (a
+    RunLockedError naming this one); the cells lock their own run folders."""
     runs_dir = Path(runs_dir)
-    runs_dir.mkdir(parents=True, exist_ok=True)
+    with RunLock(runs_dir, what="runs folder"):
+        return _run_grid_locked(grid, runs_dir, executor, retry_failed, log, share_priors)
+
+
+def _run_grid_locked(grid: Grid, runs_dir: Path, executor: Any, retry_failed: bool,
+                     log: Callable[[str], None], share_priors: bool) -> GridReport:
     planned = plan(grid, runs_dir)
     states = classify(planned)
     write_manifest(grid, runs_dir, planned)

@@ -13,9 +13,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
-import yaml
-
-from gsbench.config import check_value, default_tree, flatten, load_tree, load_yaml, parse_overrides, preset_path
+from gsbench.config import (
+    check_value,
+    default_tree,
+    flatten,
+    load_tree,
+    load_yaml_file,
+    parse_overrides,
+    preset_path,
+    short_repr,
+)
 from gsbench.datasets import synthetic
 from gsbench.errors import InputError
 from gsbench.studies import STUDIES as STUDY_TABLE
@@ -130,7 +137,7 @@ class Grid:
 
 def _as_list(value: Any, where: str) -> list:
     if not isinstance(value, list) or not value:
-        raise InputError(f"{where}: expected a non-empty list, got {value!r}")
+        raise InputError(f"{where}: expected a non-empty list, got {short_repr(value)}")
     return value
 
 
@@ -144,7 +151,7 @@ def _parse_scene(item: Any, where: str) -> SceneSpec:
             raise InputError(f"{where}: a scene mapping needs exactly one of `preset` or `path`")
         res = item.get("resolution")
         if res is not None and (not isinstance(res, list) or len(res) != 2):
-            raise InputError(f"{where}: resolution must be [width, height], got {res!r}")
+            raise InputError(f"{where}: resolution must be [width, height], got {short_repr(res)}")
         spec = SceneSpec(preset=item.get("preset"), path=item.get("path"), seed=int(item.get("seed", 0)),
                          views=item.get("views"), resolution=res)
     elif isinstance(item, str):
@@ -153,10 +160,11 @@ def _parse_scene(item: Any, where: str) -> SceneSpec:
         elif "/" in item or "$" in item or Path(item).exists():
             spec = SceneSpec(path=item)
         else:
-            raise InputError(f"{where}: {item!r} is neither a synthetic preset ({', '.join(sorted(known_presets))}) "
-                             "nor an existing folder (write paths with a '/', e.g. ./myscene)")
+            raise InputError(f"{where}: {short_repr(item)} is neither a synthetic preset "
+                             f"({', '.join(sorted(known_presets))}) nor an existing folder "
+                             "(write paths with a '/', e.g. ./myscene)")
     else:
-        raise InputError(f"{where}: a scene is a preset name, a folder path or a mapping, got {item!r}")
+        raise InputError(f"{where}: a scene is a preset name, a folder path or a mapping, got {short_repr(item)}")
     if spec.preset and spec.preset not in known_presets:
         raise InputError(
             f"{where}: unknown synthetic preset {spec.preset!r}; known: {', '.join(sorted(known_presets))}"
@@ -186,10 +194,7 @@ def load_grid(name_or_path: str | os.PathLike, extra_set: Optional[dict[str, Any
     """Parse and validate a grid file; every error names the file and the offending key."""
     path = find_grid(name_or_path)
     where = str(path)
-    try:
-        raw = load_yaml(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as e:
-        raise InputError(f"{where}: invalid YAML ({e})") from None
+    raw = load_yaml_file(path)
     if not isinstance(raw, dict):
         raise InputError(f"{where}: a grid file is a YAML mapping")
     return parse_grid(raw, where=where, path=path, extra_set=extra_set)
@@ -200,7 +205,7 @@ def _grid_preset(preset: Any, path: Optional[Path], where: str) -> Optional[str]
     if preset is None:
         return None
     if not isinstance(preset, str):
-        raise InputError(f"{where}: base.preset must be a preset name or a .yaml path, got {preset!r}")
+        raise InputError(f"{where}: base.preset must be a preset name or a .yaml path, got {short_repr(preset)}")
     p = Path(preset)
     if p.suffix in (".yaml", ".yml") and not p.is_absolute() and not p.is_file() and path is not None:
         p = Path(path).parent / p
@@ -242,7 +247,7 @@ def parse_grid(raw: dict, where: str = "<grid>", path: Optional[Path] = None,
     seeds = raw.get("seeds", [0])
     seeds = _as_list(seeds, f"{where}: seeds")
     if not all(isinstance(s, int) and not isinstance(s, bool) for s in seeds):
-        raise InputError(f"{where}: seeds must be integers, got {seeds!r}")
+        raise InputError(f"{where}: seeds must be integers, got {short_repr(seeds)}")
 
     blocks: list[tuple[str, dict[str, list]]] = []
     if raw.get("axes"):
@@ -257,7 +262,7 @@ def parse_grid(raw: dict, where: str = "<grid>", path: Optional[Path] = None,
     for bi, (mode, axes) in enumerate(blocks):
         bw = f"{where}: axes" if bi == 0 and raw.get("axes") else f"{where}: sweeps"
         if mode not in ("product", "zip"):
-            raise InputError(f"{bw}: mode must be product or zip, got {mode!r}")
+            raise InputError(f"{bw}: mode must be product or zip, got {short_repr(mode)}")
         if not isinstance(axes, dict):
             raise InputError(f"{bw}: axes must be a mapping of config key -> list of values")
         for k, values in list(axes.items()):

@@ -22,17 +22,17 @@ import numpy as np
 import torch
 
 from gsbench import rundir
-from gsbench.config import run_id
+from gsbench.config import run_config, run_id
 from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.device import resolve_device
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError, NonFiniteError, interrupted
 from gsbench.methods.base import Method
 from gsbench.methods.registry import get_method, resolve_for_scene
-from gsbench.runlock import RunLock
 from gsbench.render.threads import numba_threading_layer
-from gsbench.store import read_json, read_jsonl, write_json_atomic
+from gsbench.runlock import RunLock
 from gsbench.runs.training import train_method
+from gsbench.store import read_json, read_jsonl, write_json_atomic
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +77,7 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
     rid = run_id(config, fp)
     st = rundir.read_status(run_dir)
     if (run_dir / rundir.CONFIG).exists():
-        old = read_json(run_dir / rundir.CONFIG)
+        old = run_config(read_json(run_dir / rundir.CONFIG), run_dir / rundir.CONFIG)
         if old.get("run_id") != rid:
             raise InputError(f"{run_dir}: the folder holds run {old.get('run_id')} (another config or scene); "
                              f"use a new --out folder")
@@ -148,14 +148,18 @@ def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s:
 
 
 def load_run(run_dir: str | Path):
-    """(trained Method, resolved config, Scene) of a finished run folder."""
+    """(trained Method, resolved config, Scene) of a finished run folder. Its config.json must name the
+    method of its model.pt (the model file records its method): a folder mixing two runs is refused."""
     run_dir = Path(run_dir)
     st = rundir.read_status(run_dir)
     if st is None:
         raise FileNotFoundError(f"{run_dir / 'status.json'}: not a run folder (no status.json)")
     if st.get("state") != "done":
         raise InputError(f"{run_dir}: run is not finished (status {st.get('state')!r}: {st.get('message', '')})")
-    cfg = read_json(run_dir / rundir.CONFIG)
+    cfg = run_config(read_json(run_dir / rundir.CONFIG), run_dir / rundir.CONFIG)
     method = Method.load(run_dir / rundir.MODEL)
+    if method.name != cfg["method"]:
+        raise InputError(f"{run_dir / rundir.CONFIG}: names method {cfg['method']!r}, but the model in "
+                         f"{rundir.MODEL} is {method.name!r} (the folder mixes two runs)")
     scene = _load_scene(cfg["scene"]["path"])
     return method, cfg, scene

@@ -38,7 +38,9 @@ FLOORS: dict[str, int] = {
     "gsbench.config_keys": 0,
     "gsbench.method_table": 0,     # method names and specs as data (no method imported)
     "gsbench.environment": 0,      # machine facts and peak memory
+    "gsbench.numerics": 0,         # NUMERICS_VERSION: which generation of numbers a run belongs to
     "gsbench.runlock": 0,          # one writer per run folder
+    "gsbench.outdir": 0,           # output folders: staged, swapped in, manifest of own files
     "gsbench.device": 0,           # the one device rule (train.device, a model prior's default)
     "gsbench.resize": 0,           # every resize: RGB as 3DGS, nearest as PIL, area
     "gsbench.rundir": 0,           # the run folder's file names, status reader beside its writer
@@ -63,6 +65,7 @@ FLOORS: dict[str, int] = {
     # that dispatches them
     "gsbench.commands": 5,
     "gsbench.cli": 5,
+    "gsbench.hostile": 5,          # the hostile-input battery runs the command line itself
 }
 
 # Upward imports still present, each with why and what would remove it. Empty: none remain. A new

@@ -161,9 +161,9 @@ def test_3dovs_predictions_of_another_aspect_ratio_are_refused(tiny_scene, tmp_p
     view = sorted(d.name for d in seg.iterdir() if d.is_dir())[0]
     pred = tmp_path / "pred"
     pred.mkdir()
-    assert cv2.imwrite(str(pred / f"{view}.png"), np.full((32, 65), 255, np.uint8))    # 65x32 for 32x24 views
+    assert cv2.imwrite(str(pred / f"{view}.png"), np.full((16, 30), 255, np.uint8))    # 30x16 for 32x24 views
     msg = _one_error_line(capsys, ["eval", "--masks", str(pred), "--layout", str(tiny_scene), "--protocol", "3dovs"])
-    assert str(pred / f"{view}.png") in msg and "prediction size 65x32 has another aspect ratio" in msg
+    assert str(pred / f"{view}.png") in msg and "prediction size 30x16 has another aspect ratio" in msg
     assert f"GT masks of view {view} (32x24)" in msg
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -323,16 +324,18 @@ def test_long_reason_is_shortened_in_cells(tmp_path: Path):
 
 
 def test_rerun_removes_stale_outputs(tmp_path: Path):
+    """A re-run replaces the report it wrote: the tables and figures of a study that is gone go too."""
     from gsbench.reports import build_report
     root = tmp_path / "runs"
     write_run(root, "a", method="vanilla", scene="s", metrics={"psnr": 20.0, "ssim": 0.5})
+    write_run(root, "o/random", method="gaussiands", scene="s", study="ordering", grid={"priors.ordering": "random"},
+              metrics={"ordering_adjacent_distance": 4.0})
     out = tmp_path / "rep"
-    (out / "plots").mkdir(parents=True)
-    (out / "plots" / "bars_old_study.png").write_bytes(b"x")
-    (out / "tables").mkdir()
-    (out / "tables" / "old.md").write_text("x")
+    build_report(root, out)
+    assert (out / "tables" / "ordering.md").is_file() and (out / "plots" / "bars_ordering.png").is_file()
+    shutil.rmtree(root / "o")
     s = build_report(root, out)
-    assert not (out / "plots" / "bars_old_study.png").exists() and not (out / "tables" / "old.md").exists()
+    assert not (out / "tables" / "ordering.md").exists() and not (out / "plots" / "bars_ordering.png").exists()
     assert sorted(p.name for p in (out / "plots").glob("*.png")) == sorted(p.name for p in s.plots)
 
 

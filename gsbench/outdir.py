@@ -1,0 +1,335 @@
+"""Output folders gsbench owns: a command writes its folder whole or not at all, and never deletes or
+overwrites a file it did not write.
+
+    with OwnedFolder(out, "gsbench report", force=False) as folder:
+        ...   # write everything under folder.staging
+        folder.commit()
+
+- The command writes into a fresh staging folder beside OUT (`.OUT.staging-<pid>-<random>`), and
+  `commit` swaps it in: on Linux one rename exchanges the two folders (renameat2 RENAME_EXCHANGE),
+  elsewhere three renames (OUT is missing for that moment). Until then OUT is the old, complete
+  folder: a killed or failing command leaves it as it was (the next command into OUT removes the
+  staging folder it left).
+- OUT/.gsbench-manifest.json lists every file and folder the command wrote, with each file's size and
+  sha256. Anything under OUT the manifest does not list, or a file changed since, is foreign: the
+  folder is refused with one line naming one of them, unless `force`. With `force` the foreign files
+  are kept: hard-linked into the new folder at the same place (a foreign file where the command
+  writes one of its own is refused even so). Of the old folder only what the manifest vouches for
+  is deleted.
+- One writer at a time: a lock file beside OUT (`.OUT.writer.lock`, gsbench.runlock); a second
+  command into OUT fails at once with one line naming the holder.
+"""
+from __future__ import annotations
+
+import ctypes
+import errno
+import functools
+import glob
+import hashlib
+import logging
+import os
+import shutil
+import stat
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator, Optional
+
+from gsbench.errors import InputError
+from gsbench.runlock import RunLock
+from gsbench.store import read_json, write_json_atomic
+
+log = logging.getLogger(__name__)
+
+MANIFEST = ".gsbench-manifest.json"
+STAGING_MARK = ".gsbench-staging"       # in a staging folder until it is swapped in
+_AT_FDCWD = -100
+_RENAME_EXCHANGE = 2
+
+
+def lock_path(out: Path) -> Path:
+    """The writer lock of OUT, beside it (OUT itself is swapped)."""
+    return out.parent / f".{out.name}.writer.lock"
+
+
+def staging_prefix(out: Path) -> str:
+    return f".{out.name}.staging-"
+
+
+def foreign_message(folder: Path, first: str, command: str, force_hint: bool = True) -> str:
+    """The one-line refusal of a folder holding things `command` did not write, naming one of them."""
+    how = "choose another --out or move them away" + (", or pass --force to keep them beside the new output"
+                                                       if force_hint else "")
+    return (f"{folder}: holds files that {command} did not write (or that changed since), e.g. {first}; "
+            f"it never deletes or overwrites them: {how}")
+
+
+# ------------------------------------------------------------------ what a folder holds
+def _tree(root: Path, rel: str = "") -> Iterator[tuple[str, str]]:
+    """(relative path, kind) of everything under `root`, in name order, the files of a folder before
+    its sub-folders. kind: "file" (anything but a folder; links are not followed), "dir", "empty"
+    (a folder with nothing in it)."""
+    with os.scandir(root / rel if rel else root) as it:
+        entries = sorted(it, key=lambda en: en.name)
+    if rel and not entries:
+        yield rel, "empty"
+    subdirs = []
+    for en in entries:
+        r = f"{rel}/{en.name}" if rel else en.name
+        if en.is_dir(follow_symlinks=False):
+            subdirs.append(r)
+        else:
+            yield r, "file"
+    for r in subdirs:
+        yield r, "dir"
+        yield from _tree(root, r)
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _signature(path: Path) -> tuple[int, int, int, int]:
+    st = os.lstat(path)
+    return st.st_ino, st.st_dev, st.st_size, st.st_mtime_ns
+
+
+def write_manifest(folder: Path, command: str) -> None:
+    """FOLDER/.gsbench-manifest.json: every file (size, sha256) and folder now under FOLDER."""
+    files, folders = {}, []
+    for rel, kind in _tree(folder):
+        if kind == "dir":
+            folders.append(rel)
+        elif kind == "file" and rel not in (MANIFEST, STAGING_MARK):
+            files[rel] = {"size": os.lstat(folder / rel).st_size, "sha256": _sha256(folder / rel)}
+    write_json_atomic(folder / MANIFEST, {"command": command, "files": files, "folders": folders})
+
+
+def read_manifest(folder: Path, command: str) -> tuple[dict[str, dict], set[str]]:
+    """The files and folders FOLDER's manifest lists when `command` wrote it; nothing when it is
+    absent, unreadable or another command's (then it vouches for nothing: all in FOLDER is foreign)."""
+    try:
+        data = read_json(folder / MANIFEST)
+    except (InputError, OSError):
+        return {}, set()
+    if not isinstance(data, dict) or data.get("command") != command or not isinstance(data.get("files"), dict):
+        return {}, set()
+    files = {k: v for k, v in data["files"].items() if isinstance(v, dict)}
+    folders = {d for d in data.get("folders") or [] if isinstance(d, str)}
+    return files, folders
+
+
+def _vouched(path: Path, record: Optional[dict]) -> bool:
+    """A regular file of the size and sha256 the manifest recorded."""
+    if record is None:
+        return False
+    st = os.lstat(path)
+    return stat.S_ISREG(st.st_mode) and record.get("size") == st.st_size and record.get("sha256") == _sha256(path)
+
+
+@dataclass
+class Survey:
+    """What a folder holds: files its manifest vouches for (with their signature at the survey) and
+    the paths it does not (foreign: files, and empty folders it does not list)."""
+    owned: dict[str, tuple] = field(default_factory=dict)
+    foreign: list[str] = field(default_factory=list)
+
+
+def survey(folder: Path, command: str, first_only: bool = False) -> Survey:
+    """Sort what is under `folder` into owned (by `command`) and foreign; `first_only` stops at the
+    first foreign path (a refusal needs one, and OUT may be a big folder given by mistake)."""
+    out = Survey()
+    if not folder.is_dir():
+        return out
+    listed, folders = read_manifest(folder, command)
+    for rel, kind in _tree(folder):
+        if kind == "dir":
+            continue
+        if kind == "empty":
+            ours = rel in folders
+        else:
+            ours = rel == MANIFEST or _vouched(folder / rel, listed.get(rel))
+            if ours:
+                out.owned[rel] = _signature(folder / rel)
+        if not ours:
+            out.foreign.append(rel)
+            if first_only:
+                break
+    return out
+
+
+# ------------------------------------------------------------------ swapping
+@functools.lru_cache(maxsize=1)
+def _renameat2():
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).renameat2
+    except (OSError, AttributeError):    # not Linux / glibc before 2.28
+        return None
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    fn.restype = ctypes.c_int
+    return fn
+
+
+def exchange(a: Path, b: Path) -> None:
+    """Swap two folders: in one step where the system can, else by three renames."""
+    fn = _renameat2()
+    if fn is not None:
+        if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+            return
+        err = ctypes.get_errno()
+        if err not in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):
+            raise OSError(err, os.strerror(err), str(b))
+    log.debug("%s: no atomic exchange here; swapping by three renames", b)
+    aside = a.with_name(a.name + "-old")
+    os.rename(b, aside)
+    os.rename(a, b)
+    os.rename(aside, a)
+
+
+def _remove_owned(old: Path, before: Survey, kept: list[str], new: Path) -> None:
+    """Delete from the swapped-out folder what the survey found ours (unchanged since) and the old
+    names of kept files (now linked into the new folder); keep anything else, and say so."""
+    tree = list(_tree(old))
+    for rel, kind in tree:
+        if kind != "file":
+            continue
+        p, sig = old / rel, before.owned.get(rel)
+        ours = sig is not None and _signature(p) == sig
+        linked = rel in kept and os.path.lexists(new / rel) and _signature(p)[:2] == _signature(new / rel)[:2]
+        if ours or linked:
+            p.unlink()
+    for rel, kind in reversed(tree):      # deepest first
+        if kind != "file":
+            try:
+                (old / rel).rmdir()
+            except OSError:
+                pass
+    try:
+        old.rmdir()
+    except OSError:
+        left = next((rel for rel, _ in _tree(old)), "?")
+        log.warning("%s: the old %s is kept here: it holds files that appeared while it was rewritten "
+                    "(e.g. %s)", old, new, left)
+
+
+def _clashes(staging: Path, rel: str) -> bool:
+    """Something of the new output at `rel`, or a file where one of its parent folders would be."""
+    p = staging / rel
+    if os.path.lexists(p) or rel == STAGING_MARK:
+        return True
+    return any(os.path.lexists(q) and not q.is_dir() for q in p.parents if staging in q.parents)
+
+
+def _check_target(out: Path) -> None:
+    """OUT is a folder or can be one: a file there, or where a parent folder should be, is refused
+    (the latter with the error every writer gives, ENOTDIR)."""
+    for parent in out.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(out))
+            break
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder")
+
+
+def refuse_foreign(out: str | os.PathLike, command: str, force_hint: bool = True) -> None:
+    """The one-line refusal when OUT holds anything `command` did not write: a check before long work
+    (OwnedFolder checks again, under OUT's lock, before it writes)."""
+    out = Path(out)
+    _check_target(out)
+    s = survey(out, command, first_only=True)
+    if s.foreign:
+        raise InputError(foreign_message(out, s.foreign[0], command, force_hint))
+
+
+def _remove_left_staging(out: Path) -> None:
+    """Staging folders a killed command left beside OUT (marked, so nothing else is ever removed);
+    called under OUT's lock, so none of them is being written."""
+    for d in out.parent.glob(glob.escape(staging_prefix(out)) + "*"):
+        if d.is_dir() and not d.is_symlink() and (d / STAGING_MARK).is_file():
+            shutil.rmtree(d, ignore_errors=True)
+
+
+class OwnedFolder:
+    """OUT written whole by one command: staged beside it, swapped in by `commit`."""
+
+    def __init__(self, out: str | os.PathLike, command: str, force: bool = False, force_hint: bool = True,
+                 what: str = "output folder") -> None:
+        out = Path(os.path.abspath(out))
+        self.out = out.resolve() if out.is_symlink() else out    # swap the folder, not a link to it
+        self.command = command
+        self.force = force
+        self.force_hint = force_hint
+        self.what = what
+        self.staging: Optional[Path] = None
+        self.kept: list[str] = []
+        self._lock: Optional[RunLock] = None
+        self._swapped = False
+
+    def _survey(self, first_only: bool = False) -> Survey:
+        s = survey(self.out, self.command, first_only=first_only and not self.force)
+        if s.foreign and not self.force:
+            raise InputError(foreign_message(self.out, s.foreign[0], self.command, self.force_hint))
+        return s
+
+    def __enter__(self) -> "OwnedFolder":
+        _check_target(self.out)
+        self._lock = RunLock(self.out, self.command, lock_path=lock_path(self.out), what=self.what).acquire()
+        try:
+            self._survey(first_only=True)           # refuse early, before the command's work
+            _remove_left_staging(self.out)
+            prefix = f"{staging_prefix(self.out)}{os.getpid()}-"
+            self.staging = Path(tempfile.mkdtemp(prefix=prefix, dir=self.out.parent))
+            (self.staging / STAGING_MARK).write_bytes(b"")
+        except BaseException:
+            self._lock.release()
+            raise
+        return self
+
+    def _keep(self, foreign: list[str]) -> None:
+        """Hard-link each foreign path into the staging folder (force); one the command wrote too is refused."""
+        assert self.staging is not None
+        for rel in foreign:
+            src, dst = self.out / rel, self.staging / rel
+            if src.is_dir() and not src.is_symlink() and dst.is_dir():
+                continue                     # an empty folder the new output has too
+            if _clashes(self.staging, rel):
+                raise InputError(f"{src}: not written by {self.command}, which writes this path itself; "
+                                 "--force keeps such files but never overwrites them: move it away")
+            try:
+                if src.is_dir() and not src.is_symlink():
+                    dst.mkdir(parents=True, exist_ok=True)
+                else:
+                    dst.parent.mkdir(parents=True, exist_ok=True)
+                    os.link(src, dst, follow_symlinks=False)
+            except OSError as e:
+                raise InputError(f"{src}: cannot keep it in the new folder ({e.strerror}); move it away") from None
+        self.kept = list(foreign)
+
+    def commit(self) -> None:
+        """Write the manifest, keep foreign files (force), swap the staging folder in, delete the old
+        folder's own files."""
+        assert self.staging is not None and self._lock is not None
+        write_manifest(self.staging, self.command)
+        before = self._survey()      # again: the folder may have changed while the command ran
+        self._keep(before.foreign)
+        (self.staging / STAGING_MARK).unlink()
+        if self.out.exists():
+            exchange(self.staging, self.out)
+            self._swapped = True
+            _remove_owned(self.staging, before, self.kept, self.out)
+        else:
+            os.rename(self.staging, self.out)
+            self._swapped = True
+
+    def __exit__(self, *exc) -> None:
+        try:
+            if not self._swapped and self.staging is not None:
+                shutil.rmtree(self.staging, ignore_errors=True)
+        finally:
+            if self._lock is not None:
+                self._lock.release()
