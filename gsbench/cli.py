@@ -25,6 +25,9 @@ COMMANDS = {
     "eval": ("eval", "evaluate a trained run, or score a folder of predicted masks against a layout"),
     "ablate": ("ablate", "run an ablation / noise grid (local process pool or submitit)"),
     "claims": ("claims", "run every grid the paper-claims table needs, then print the table and write the report"),
+    "publish": ("publish", "add finished claims cells to the published store (results/cpu), list stale ones, "
+                           "generate docs/claims.md"),
+    "verify": ("verify", "re-run published cells drawn at random and compare every metric"),
     "collect": ("collect", "gather every results.json under a folder into one table"),
     "report": ("report", "write tables, plots and a static HTML report from collected results"),
     "stress": ("stress", "run the numerical stress battery against float64 references"),

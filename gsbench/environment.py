@@ -12,6 +12,7 @@ process each (gsbench.grids.executors), so nothing carries over between cells ei
 """
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import platform
@@ -21,6 +22,8 @@ import subprocess
 import sys
 from pathlib import Path
 from typing import Optional
+
+from gsbench.numerics import NUMERICS_VERSION
 
 log = logging.getLogger(__name__)
 
@@ -53,15 +56,51 @@ def git_sha() -> Optional[str]:
     return sha if head.returncode == 0 and sha else None
 
 
+def package_version(name: str) -> Optional[str]:
+    """An installed distribution's version without importing it (None when it is not installed)."""
+    from importlib import metadata
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def cpu_facts() -> dict:
+    """The CPU's model name, a short hash of its feature flags and its physical core count, from
+    /proc/cpuinfo (None each where it does not say): two machines with the same model and flags run
+    the CPU kernels with the same instructions, so `gsbench verify` compares their numbers exactly."""
+    model = flags = None
+    cores: set[tuple[str, str]] = set()
+    physical = "0"
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                key, _, value = (part.strip() for part in line.partition(":"))
+                if key == "model name" and model is None:
+                    model = value
+                elif key in ("flags", "Features") and flags is None:
+                    flags = hashlib.sha256(" ".join(sorted(value.split())).encode()).hexdigest()[:16]
+                elif key == "physical id":
+                    physical = value
+                elif key == "core id":
+                    cores.add((physical, value))
+    except OSError:
+        pass
+    return {"cpu_model": model or platform.processor() or None, "cpu_flags": flags,
+            "physical_cores": len(cores) or None}
+
+
 def env_info() -> dict:
-    """Host, hardware and software versions (the fields results compare runs by)."""
+    """Host, hardware and software versions (the fields results compare runs by), and the numerics
+    version the run's numbers belong to (gsbench.numerics)."""
     import numpy as np
     import torch
     cuda = torch.cuda.get_device_name(torch.cuda.current_device()) if torch.cuda.is_available() else None
     return {"host": socket.gethostname(), "cpu": platform.processor() or platform.machine(),
             "cores": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
             "torch": torch.__version__, "numpy": np.__version__, "torch_threads": torch.get_num_threads(),
-            "cuda": cuda, "gsbench": gsbench_version(), "git_sha": git_sha()}
+            "cuda": cuda, "gsbench": gsbench_version(), "git_sha": git_sha(), **cpu_facts(),
+            "numba": package_version("numba"), "numerics_version": NUMERICS_VERSION}
 
 
 def lifetime_peak_rss_mb() -> float:

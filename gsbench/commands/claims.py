@@ -26,15 +26,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--grids", nargs="+", default=None, metavar="GRID",
                         help="run only these grids of the plan (default: all; see --list)")
     parser.add_argument("--list", action="store_true", help="list the plan's grids and their cell counts")
+    parser.add_argument("--force", action="store_true",
+                        help="use an --out folder that holds files gsbench did not write there (they are left alone)")
+    parser.add_argument("--store", type=Path, default=None, metavar="STORE",
+                        help="reuse the cells published in this results store (default: the repository's "
+                             "results/cpu when it exists; docs/publishing.md)")
+    parser.add_argument("--no-store", action="store_true", help="reuse no published cell: train every cell")
     parser.add_argument("--no-progress", action="store_true")
 
 
 def run(args: argparse.Namespace) -> int:
-    from concurrent.futures.process import BrokenProcessPool
-
-    from gsbench import grids  # lazy: start-up (cli loads all commands)
     from gsbench.grids.claims import CLAIM_GRIDS, CONTROL_GRIDS, plan_grids  # lazy: start-up (cli loads all commands)
-    from gsbench.grids.executors import make_executor  # lazy: start-up (cli loads all commands)
+    from gsbench.grids.runs_folder import owned_runs_folder  # lazy: start-up (cli loads all commands)
     names = tuple(args.grids) if args.grids else None
     unknown = [n for n in names or () if n not in CLAIM_GRIDS + CONTROL_GRIDS]
     if unknown:
@@ -46,11 +49,26 @@ def run(args: argparse.Namespace) -> int:
             print(f"{g.name:28s} study={g.study:22s} cells={len(g.cells()):4d}  {g.description}")
         print(f"{sum(len(g.cells()) for g in plan)} cells in {len(plan)} grids")
         return 0
+    with owned_runs_folder(args.out, "gsbench claims", force=args.force):
+        return _run_plan(args, plan)
+
+
+def _run_plan(args: argparse.Namespace, plan: list) -> int:
+    """Every grid of the plan into args.out, then the report into args.out/report (under the folder's lock)."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    from gsbench import grids  # lazy: start-up (cli loads all commands)
+    from gsbench.grids.executors import make_executor  # lazy: start-up (cli loads all commands)
+    from gsbench.grids.store import repo_store, reuse_published  # lazy: start-up (cli loads all commands)
+    from gsbench.reports.build import build_report  # lazy: start-up (cli loads all commands)
     executor = make_executor(args.executor, jobs=args.jobs, folder=args.out / ".submitit", cluster=args.cluster,
                              progress=not args.no_progress)
+    store = None if args.no_store else args.store or repo_store()
     t0, not_done = time.time(), 0
     for g in plan:
         try:
+            if store is not None:
+                reuse_published(g, args.out, store, log=print)
             rep = grids.run_grid(g, args.out, executor, retry_failed=args.retry_failed, log=print)
         except BrokenProcessPool as e:
             print(f"gsbench claims: a worker process died ({e}); finished cells are saved, re-run to resume",
@@ -62,8 +80,7 @@ def run(args: argparse.Namespace) -> int:
             if r and r.get("state") != "done":
                 print(f"failed: {r['run_dir']}: {r.get('error')}", file=sys.stderr)
     print(f"gsbench claims: {len(plan)} grids in {time.time() - t0:.0f} s" + (" (quick)" if args.quick else ""))
-    from gsbench.reports.build import build_report  # lazy: start-up (cli loads all commands)
-    summary = build_report(args.out, args.out / "report", progress=not args.no_progress)
+    summary = build_report(args.out, args.out / "report", progress=not args.no_progress, force=args.force)
     for t in ("paper_claims", "claims_controls"):
         if t in summary.tables:
             print((summary.out_dir / "tables" / f"{t}.md").read_text(encoding="utf-8"))

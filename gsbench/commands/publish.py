@@ -1,0 +1,109 @@
+"""`gsbench publish`: the published results store (results/cpu) and the page generated from it.
+
+    gsbench publish RUNS --to results/cpu          add the finished cells of the claims plan in RUNS
+    gsbench publish --status [results/cpu]         current / stale cells per grid
+    gsbench publish --page docs/claims.md --from results/cpu --readme README.md [--check]
+
+RUNS is a `gsbench claims --out` folder. A cell whose config is not the plan's, or that another
+numerics version computed, is refused; then nothing is written (docs/publishing.md).
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from gsbench.errors import InputError
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("runs", nargs="?", type=Path, default=None, metavar="RUNS",
+                        help="a `gsbench claims --out` folder whose finished cells are added (with --to)")
+    parser.add_argument("--to", type=Path, default=None, metavar="STORE", help="the store to add them to")
+    parser.add_argument("--status", nargs="?", const="", default=None, metavar="STORE",
+                        help="list the store's current and stale cells (default: the repository's results/cpu)")
+    parser.add_argument("--page", type=Path, default=None, metavar="PAGE",
+                        help="generate the claims page (figures in PAGE without .md/) from the store")
+    parser.add_argument("--from", dest="source", type=Path, default=None, metavar="STORE",
+                        help="the store the page is generated from (default: the repository's results/cpu)")
+    parser.add_argument("--readme", type=Path, default=None,
+                        help="with --page: regenerate the claims block of this README too")
+    parser.add_argument("--check", action="store_true",
+                        help="with --page: write nothing; exit 1 and print the lines that differ from the files")
+    parser.add_argument("--grids", nargs="+", default=None, metavar="GRID",
+                        help="the plan: these grids of the claims plan or grid files (default: the whole plan)")
+    parser.add_argument("--quick", action="store_true", help="the plan of `gsbench claims --quick`")
+
+
+def _store(path, option: str) -> Path:
+    """The given store, else the repository's results/cpu."""
+    from gsbench.grids.store import repo_store  # lazy: start-up (cli loads all commands)
+    if path:
+        return Path(path)
+    found = repo_store()
+    if found is None:
+        raise InputError(f"{option}: no store given and no results/cpu in the gsbench checkout")
+    return found
+
+
+def run(args: argparse.Namespace) -> int:
+    modes = [m for m, on in (("RUNS", args.runs is not None), ("--status", args.status is not None),
+                             ("--page", args.page is not None)) if on]
+    if len(modes) != 1:
+        raise InputError("give one of RUNS --to STORE, --status [STORE] or --page PAGE"
+                         + (f" (got {', '.join(modes)})" if modes else ""))
+    if args.runs is not None and args.to is None:
+        raise InputError("RUNS needs --to STORE (the store to add the cells to)")
+    from gsbench.grids.store import plan_for  # lazy: start-up (cli loads all commands)
+    grids = plan_for(args.grids, args.quick)
+    if args.runs is not None:
+        return _publish(args.runs, args.to, grids)
+    if args.status is not None:
+        return _status(_store(args.status, "--status"), grids)
+    return _page(args, _store(args.source, "--from"), grids)
+
+
+def _publish(runs: Path, store: Path, grids: list) -> int:
+    from gsbench.grids.store import publish  # lazy: start-up (cli loads all commands)
+    rep = publish(runs, store, grids)
+    if rep.refused:
+        for run_dir, why in rep.refused:
+            print(f"refused: {run_dir}: {why}")
+        raise InputError(f"{runs}: {len(rep.refused)} cells refused (listed above); nothing was published")
+    for p in rep.written + rep.replaced:
+        print(f"published: {p}")
+    print(f"gsbench publish: {len(rep.written)} cells added, {len(rep.replaced)} replaced (older numerics version), "
+          f"{len(rep.unchanged)} already published, {rep.not_finished} not finished")
+    return 0
+
+
+def _status(store: Path, grids: list) -> int:
+    from gsbench.grids.store import classify, format_store_status, read_store  # lazy: start-up
+    cells = read_store(store)
+    current, stale = classify(cells, grids)
+    print(format_store_status(cells, current, stale, grids))
+    return 0
+
+
+def _page(args: argparse.Namespace, store: Path, grids: list) -> int:
+    from gsbench.grids.store import classify, read_store  # lazy: start-up (cli loads all commands)
+    from gsbench.reports.claims_page import build_page, check_page, figure_folder, write_page  # lazy: start-up
+    if args.check and not args.page.is_file():
+        raise InputError(f"{args.page}: page not found (generate it without --check first)")
+    current, stale = classify(read_store(store), grids)
+    page = build_page(current, stale, grids, figure_folder(args.page).name)
+    if not args.check:
+        for p in write_page(page, args.page, args.readme):
+            print(f"wrote {p}")
+        return 0
+    folder = figure_folder(args.page)
+    names = [p.name for p in folder.glob("dose_*.png")] if folder.is_dir() else []
+    readme = args.readme.read_text(encoding="utf-8") if args.readme is not None else None
+    diff = check_page(page, args.page.read_text(encoding="utf-8"), readme, names)
+    for line in diff:
+        print(line)
+    if diff:
+        print(f"gsbench publish: {args.page} differs from the store {store}; regenerate it with `gsbench publish "
+              f"--page {args.page} --from {store}" + (f" --readme {args.readme}`" if args.readme else "`"))
+        return 1
+    print(f"gsbench publish: {args.page} matches the store {store}")
+    return 0

@@ -1,0 +1,135 @@
+"""`gsbench verify`: re-run published cells from their published configs and compare every metric.
+
+Why: a published number is only worth what a re-run gives. K cells are drawn at random (seeded, so
+a failure can be repeated) among the store's cells of today's numerics version; each is trained and
+evaluated again by the grid machinery (run_cell) in a temporary folder, on its scene generated
+again from the recorded spec (its fingerprint must match), with the published resolved config.
+
+On the CPU family that published the cell (same model name and feature flags) the comparison is
+exact: CPU training gives the same bits for any thread count. Elsewhere the numbers are compared
+within RTOL / ATOL, and the output says which. Evaluation's timing metrics are never compared.
+"""
+from __future__ import annotations
+
+import copy
+import random
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from gsbench import rundir
+from gsbench.datasets import scene_fingerprint
+from gsbench.environment import cpu_facts
+from gsbench.errors import InputError
+from gsbench.grids.planning import resolve_scene
+from gsbench.grids.running import run_cell
+from gsbench.grids.spec import SceneSpec
+from gsbench.grids.store import MetricRow, Published, compare_metrics
+from gsbench.numerics import NUMERICS_VERSION
+from gsbench.store import read_json
+
+# across CPU families: other instructions round differently, and training compounds it
+RTOL = 1e-2
+ATOL = 1e-4
+
+
+def same_cpu(prov: dict, here: dict) -> bool:
+    """The published cell ran on this machine's CPU family: same model name and feature flags."""
+    return (prov.get("cpu_model") is not None and prov.get("cpu_flags") is not None
+            and prov.get("cpu_model") == here.get("cpu_model") and prov.get("cpu_flags") == here.get("cpu_flags"))
+
+
+@dataclass
+class CellCheck:
+    cell: Published
+    exact: bool
+    rows: list[MetricRow] = field(default_factory=list)
+    error: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return not self.error and all(r.ok for r in self.rows)
+
+    def mode(self) -> str:
+        prov = self.cell.record["provenance"]
+        if self.exact:
+            return f"exact (same CPU family: {prov.get('cpu_model')})"
+        return (f"within rtol {RTOL:g} + atol {ATOL:g} (published on {prov.get('cpu_model') or 'an unrecorded CPU'}, "
+                f"this machine {cpu_facts().get('cpu_model') or 'unknown'})")
+
+
+def draw(cells: list[Published], k: int, seed: int) -> list[Published]:
+    """K cells of today's numerics version, drawn at random with `seed` (all of them when fewer)."""
+    pool = sorted((c for c in cells if c.numerics_version == NUMERICS_VERSION), key=lambda c: (c.grid, c.run_id))
+    return random.Random(seed).sample(pool, min(max(k, 0), len(pool)))
+
+
+def _rerun(cell: Published, work: Path) -> dict[str, Any]:
+    """Train and evaluate the cell again under work/; its results.json."""
+    rec = cell.record
+    try:
+        scene = SceneSpec(**rec["cell"]["scene"])
+    except (KeyError, TypeError):
+        raise InputError(f"{cell.path}: cell.scene is not a scene spec "
+                         "(preset or path, seed, views, resolution)") from None
+    scene_path = resolve_scene(scene, work)
+    fp = scene_fingerprint(scene_path)
+    if fp != rec["scene_fingerprint"]:
+        raise RuntimeError(f"scene {scene.label} generated again has fingerprint {fp[:12]}, the cell's is "
+                           f"{str(rec['scene_fingerprint'])[:12]}")
+    config = copy.deepcopy(rec["config"])
+    if isinstance(config.get("priors"), dict):
+        config["priors"]["cache_dir"] = str((work / rundir.CACHE_DIRNAME).resolve())
+    run_dir = work / cell.run_id
+    spec = {"run_dir": str(run_dir), "scene_path": str(scene_path), "config": config, "study": rec.get("study"),
+            "axes": rec["cell"].get("axes", {}), "scene": scene.to_dict(), "seed": rec["cell"].get("seed"),
+            "method": rec["cell"].get("method")}
+    out = run_cell(spec)
+    if out["state"] != "done":
+        raise RuntimeError(f"the re-run {out['state']}: {out.get('error')}")
+    return read_json(run_dir / rundir.RESULTS)
+
+
+def verify_cell(cell: Published, work: Path) -> CellCheck:
+    """Re-run one cell under work/ and compare its metrics with the published ones."""
+    check = CellCheck(cell, same_cpu(cell.record["provenance"], cpu_facts()))
+    try:
+        now = _rerun(cell, work)
+    except (RuntimeError, InputError) as e:
+        check.error = str(e)
+        return check
+    tol = {} if check.exact else {"rtol": RTOL, "atol": ATOL}
+    check.rows = compare_metrics(cell.metrics, now.get("metrics") or {}, **tol)
+    return check
+
+
+def verify(cells: list[Published], k: int, seed: int) -> list[CellCheck]:
+    """Draw K cells and check each in its own temporary folder."""
+    out = []
+    for cell in draw(cells, k, seed):
+        with tempfile.TemporaryDirectory(prefix="gsbench-verify-") as tmp:
+            out.append(verify_cell(cell, Path(tmp)))
+    return out
+
+
+def format_check(check: CellCheck) -> str:
+    """The cell's comparison as a per-metric table (metrics null on both sides are left out)."""
+    c = check.cell
+    head = f"cell {c.grid}/{c.run_id} ({c.record['cell'].get('method')}, seed {c.record['cell'].get('seed')}): "
+    if check.error:
+        return head + f"MISMATCH: {check.error}"
+    lines = [head + check.mode()]
+    shown = [r for r in check.rows if r.published is not None or r.now is not None]
+    width = max([len("metric")] + [len(r.metric) for r in shown])
+    lines.append(f"  {'metric':{width}s}  {'published':>22s}  {'now':>22s}  result")
+    for r in shown:
+        lines.append(f"  {r.metric:{width}s}  {_num(r.published):>22s}  {_num(r.now):>22s}  "
+                     f"{'ok' if r.ok else 'MISMATCH'}")
+    bad = sum(not r.ok for r in check.rows)
+    lines.append(f"  {len(check.rows)} metrics compared ({len(shown)} with a value), {bad} mismatched")
+    return "\n".join(lines)
+
+
+def _num(v: Any) -> str:
+    return "null" if v is None else repr(v)
