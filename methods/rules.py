@@ -23,9 +23,10 @@ def depth_source(cfg: dict, scene) -> tuple[bool, str]:
     if prov in (None, "none"):
         return False, "priors.depth.provider=none"
     if prov == "gt" and not scene.has_depth:
-        return False, "priors.depth.provider=gt but the scene has no GT depth"
-    if prov == "sparse" and not scene.has_points:
-        return False, "priors.depth.provider=sparse but the scene has no sparse points"
+        hint = " (priors.depth.provider=sfm builds one from its sparse points)" if scene.has_points else ""
+        return False, f"priors.depth.provider=gt but the scene has no GT depth{hint}"
+    if prov in ("sparse", "sfm") and not scene.has_points:
+        return False, f"priors.depth.provider={prov} but the scene has no sparse points"
     return True, ""
 
 

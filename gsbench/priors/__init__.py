@@ -6,7 +6,8 @@ Public API (the priors interface in the team contract):
   get_feature_provider(features_cfg) -> FeatureProvider
   DepthPrior, Priors, FeatureProvider, CANONICAL_NEGATIVES
 
-Modules: ordering (pose / random / filename chains), depth (gt / sparse / depth-anything),
+Modules: ordering (pose / random / filename chains), depth (gt / sparse / sfm / depth-anything),
+sfm_depth (the weight-free sfm prior: SfM points densified along the photo's edges),
 masks (gt / simulated / sam2), segmenter (SAM-like weight-free failures), propagation (carried
 tracks, flow / reproject warps), clipspace (CLIP-geometry text/image space),
 features (text-aligned / openclip), cache (content-hash disk cache), warp (geometry helpers),

@@ -32,6 +32,7 @@ from gsbench.priors import warp as W
 from gsbench.priors.cache import PriorCache, cache_key, scene_content_hash
 from gsbench.priors.features import FeatureProvider, TextAlignedFeatures, get_feature_provider
 from gsbench.priors.ordering import ORDERINGS, camera_centers, order_views
+from gsbench.priors.sfm_depth import points_digest
 from gsbench.resize import resize_area, resize_nearest
 
 MASK_PROVIDERS = ("simulated", "gt", "sam2")
@@ -245,6 +246,8 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
             params["seed"] = seed
             params["model_files"] = (_folder_signature(dcfg.get("model_path"))
                                      if dcfg.get("provider") == "depth-anything" else [])
+            if dcfg.get("provider") == "sfm":   # the scene fingerprint leaves the points out
+                params["points"] = points_digest(scene)
             key = cache_key("depth", pid, PIPELINE_VERSION, params, scene_content())
             hit = cache.load("depth", key)
             if hit is not None:
