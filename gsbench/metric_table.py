@@ -23,7 +23,9 @@ IMAGE_METRICS = ("psnr", "ssim", "lpips", "fps", "ssim_valid", "lpips_package")
 SEG_BASES = {"3dovs": ("miou", "mbiou", "pixel_acc", "pixel_acc_labelled"), "lerf": ("miou", "loc_acc")}
 MASK_FOLDER_METRICS = ("mbiou_lerf",)
 REMOVAL_METRICS = ("removal_residual", "removal_psnr_outside")
-DEPTH_METRICS = ("depth_absrel",)
+# depth_absrel counts an empty pixel as an error of 1; the covered-pixel error and the coverage beside it
+# tell a wrong depth from a missing surface (gsbench/evaluation/depth.py)
+DEPTH_METRICS = ("depth_absrel", "depth_absrel_covered", "depth_coverage")
 ORDERING_METRICS = ("ordering_adjacent_distance", "ordering_adjacent_mask_iou", "ordering_adjacent_mask_iou_strict",
                     "ordering_adjacent_mask_iou_flow")
 # what the method was given to work with, read from its train summary: the share of pixels the L_ds edge
@@ -89,6 +91,9 @@ METRICS: dict[str, MetricSpec] = {
     "removal_residual": MetricSpec("Residual object px (%)", "Residual object px (\\%)", "lower", 100.0, 2),
     "removal_psnr_outside": MetricSpec("PSNR outside (dB)", "PSNR outside (dB)", "higher", 1.0, 2),
     "depth_absrel": MetricSpec("Depth AbsRel (%)", "Depth AbsRel (\\%)", "lower", 100.0, 2),
+    "depth_absrel_covered": MetricSpec("Depth AbsRel, covered px (%)", "Depth AbsRel covered (\\%)", "lower",
+                                       100.0, 2),
+    "depth_coverage": _pct("Depth coverage"),
     "ordering_adjacent_distance": MetricSpec("Adjacent pose distance", "Adjacent Pose Distance", "lower", 1.0, 3),
     "ordering_adjacent_mask_iou": _pct("Adjacent mask IoU (shared ids)"),
     "ordering_adjacent_mask_iou_strict": _pct("Adjacent mask IoU (strict)"),

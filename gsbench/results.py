@@ -11,6 +11,8 @@ results.json keys (reports read only these):
   skipped {metric: reason}  (every null metric has one; keys are metric names),
   notes {topic: text}  (what was left out that is not a metric: views without GT, ...),
   frames {frame set: [frame names]}, frames_skipped {frame name: reason},
+  split {holdout, views, trained_ids, trained_names, held_out_ids, held_out_names} (the views the run
+  trained on and held out, train.holdout and train.views; null for a scored mask folder or a failed cell),
   resolution {frame set: "WxH"}, timings, memory, machine, status, dropped.
 
 Metric names are built from parts (see `METRIC_NAMES`): a segmentation metric is
@@ -57,14 +59,16 @@ def check_skipped(metrics: dict, skipped: dict) -> None:
 
 def run_results(*, identity: dict, metrics: dict, metric_impl: dict, skipped: dict, per_view: dict,
                 view_names: list, frames: dict, frames_skipped: dict, resolution: dict, notes: dict,
-                timings: dict, memory: dict, machine: dict, status: str = "done", **extra: Any) -> dict:
-    """results.json of an evaluated run or a scored mask folder (checked: see `check_skipped`)."""
+                timings: dict, memory: dict, machine: dict, status: str = "done", split: Optional[dict] = None,
+                **extra: Any) -> dict:
+    """results.json of an evaluated run or a scored mask folder (checked: see `check_skipped`); `split`
+    is the run's `gsbench.datasets.splits.split_record` (None where no run was trained)."""
     if status not in STATUSES:
         raise ValueError(f"status must be one of {STATUSES}, got {status!r}")
     check_skipped(metrics, skipped)
     out = {"results_version": RESULTS_VERSION, **_identity(identity)}
     out.update(metric_impl=metric_impl, metrics=metrics, per_view=per_view, view_names=view_names,
-               skipped=skipped, notes=notes, frames=frames, frames_skipped=frames_skipped,
+               skipped=skipped, notes=notes, frames=frames, frames_skipped=frames_skipped, split=split,
                resolution=resolution, timings=timings, memory=memory, machine=machine, status=status)
     out.update(extra)
     return out
@@ -92,7 +96,7 @@ IDENTITY_KEYS = ("run_id", "method", "scene", "scene_path", "seed", "study", "gr
 
 
 REQUIRED_KEYS = ("run_id", "method", "scene", "metrics")
-_OBJECTS = ("metrics", "skipped", "grid", "providers", "machine", "timings", "memory")
+_OBJECTS = ("metrics", "skipped", "grid", "providers", "machine", "timings", "memory", "split")
 
 
 def check_shape(res: Any, path: Any) -> None:

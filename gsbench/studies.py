@@ -58,7 +58,7 @@ _ALL: tuple[Study, ...] = (
     Study("lambda_grid", "Lambda grid (hyper-parameter sensitivity)", _LAMBDAS),
     Study("depth_noise", "Depth-noise robustness", _NOISE, {_NOISE[0]: None, _NOISE[1]: 0},
           "the clean depth prior (severity 0)"),
-    Study("control_depth", "Control: few-view L_depth with an exact prior", ("gaussiands.lambdas.depth",),
+    Study("control_depth", "Control: few-view L_depth with an exact prior", ("train.views", "gaussiands.lambdas.depth"),
           kind="control"),
     Study("control_depth_noise", "Control: depth noise at lambda_depth 1, few views", _NOISE, kind="control"),
     Study("control_ds", "Control: edge-averaged L_ds with capped Gaussians", ("gaussiands.losses.ds",),

@@ -333,7 +333,9 @@ def scene_init(scene, config: dict, feature_dim: int):
                              f"(LLFF poses_bounds)")
         near, far = float(meta["near"]), float(meta["far"])
         n = max(1, int(icfg["num_random"]))
-        cams = [scene.cameras[i] for i in scene.train_ids] or list(scene.cameras)
+        # the cameras the run trains on (train.views, train.holdout), not the scene's whole training split:
+        # a few-view run must not start from points spread over views it never sees
+        cams = [scene.cameras[i] for i in split_ids(scene, config)[0]]
         xyz = frustum_points(cams, near, far, n, int(config["seed"]))
         rgb = np.random.default_rng(int(config["seed"]) + 1).random((n, 3))
         fld, _ = init_field(xyz, rgb, "points", n, centre, half, sh, feature_dim, int(config["seed"]), None)

@@ -18,8 +18,11 @@ paper number are in the same display units (PSNR in dB, IoU in %, r as is):
   The margin is gsbench's own, fixed here before any run, not a number of the paper;
 - not run: the study, or one of the two rows it compares, has no finished run with the metric;
 - not testable: the resolver dropped the setting the claim is about (e.g. no depth prior);
-- blind: not reproduced or inconclusive while the claim's positive control is not marked, or while the
-  compared row lacked what the mechanism acts on (`Claim.inputs`, e.g. an empty L_ds edge map).
+- blind: any verdict whose interval includes zero (or that has none) while the claim's positive control
+  ran and is not marked, or while the compared row lacked what the mechanism acts on (`Claim.inputs`,
+  e.g. an empty L_ds edge map). A robustness "reproduced" is included: a study that cannot see the
+  mechanism also shows "no change". An interval that excludes zero is never blinded.
+The paper's number is compared and printed at the paper's decimals (`Claim.paper_decimals`).
 """
 from __future__ import annotations
 
@@ -32,7 +35,7 @@ from gsbench.reports.ablations import _covered, run_dropped
 from gsbench.reports.controls import blind_claims, starved
 from gsbench.reports.data import Results, same
 from gsbench.reports.spec import metric_spec
-from gsbench.reports.stats import Diff, compare, mde_r, pearson, pearson_interval
+from gsbench.reports.stats import Diff, compare, family_note, mde_r, pearson, pearson_interval
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
 from gsbench.reports.sweeps import lambda_points
 from gsbench.reports.table import Cell, Column, Row, Table
@@ -41,9 +44,10 @@ REPRODUCED, OPPOSITE, INCONCLUSIVE, NOT_RUN, NOT_TESTABLE = (
     "reproduced", "opposite", "inconclusive", "not run", "not testable")
 SMALLER, NOT_REPRODUCED, BLIND = "smaller than claimed", "not reproduced", "blind"
 def verdict(direction: int, lo: float | None, hi: float | None, paper: float | None = None,
-            margin: float = ROBUST_MARGIN_DB) -> str:
+            margin: float = ROBUST_MARGIN_DB, decimals: int | None = None) -> str:
     """The verdict of one claim from the interval [lo, hi] of (row - reference), or of r; with the
-    paper's number `paper` the verdict is sized against it (module docstring)."""
+    paper's number `paper` the verdict is sized against it (module docstring), at the paper's precision
+    when `decimals` (the paper's) is given: an interval that reaches +2.62 at two decimals reaches +2.62."""
     if lo is None or hi is None:
         return INCONCLUSIVE
     if direction == 0:  # robustness: harmful side is negative (a drop)
@@ -60,7 +64,8 @@ def verdict(direction: int, lo: float | None, hi: float | None, paper: float | N
         return OPPOSITE
     if paper is None:
         return REPRODUCED if a > 0.0 else INCONCLUSIVE
-    short = b < abs(paper)  # the whole interval lies short of the paper's value
+    far = b if decimals is None else round(b, decimals)
+    short = far < abs(paper)  # the whole interval lies short of the paper's value
     if a > 0.0:
         return SMALLER if short else REPRODUCED
     return NOT_REPRODUCED if short else INCONCLUSIVE
@@ -69,7 +74,7 @@ def verdict(direction: int, lo: float | None, hi: float | None, paper: float | N
 def verdict_text(v: str, direction: int, lo: float | None, hi: float | None, paper: float | None,
                  decimals: int) -> str:
     """The verdict with, when the interval lies short of the paper's number, the largest effect on the
-    paper's side it still allows ("at most +0.14, paper +37.30")."""
+    paper's side it still allows ("at most +0.14, paper +37.30"), both at `decimals`, the paper's."""
     if v not in (SMALLER, NOT_REPRODUCED) or lo is None or hi is None or paper is None:
         return v
     bound = f"at most {hi:+.{decimals}f}" if direction > 0 else f"at least {lo:+.{decimals}f}"
@@ -102,10 +107,14 @@ def _dropped_reason(res: Results, rids: list[str], axes: list[str]) -> str | Non
 
 @dataclass
 class Measured:
-    """One row's measurement: the effect text, the verdict (with its bound), the MDE text."""
+    """One row's measurement: the effect text, the verdict (with its bound), the MDE text, and whether
+    the verdict rests on an interval that includes zero (or on none), the only verdicts a blind
+    control may replace."""
     text: str
     verdict: str
     mde: str = "–"
+    no_effect: bool = False
+    interval: bool = False  # the text prints a 95 % interval (counted in the caption's family)
 
 
 def _mde_text(mde: float | None, decimals: int, why: str) -> str:
@@ -123,14 +132,15 @@ def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> Measured:
         mde = _mde_text(mde_r(len(xs)), 2, f"{len(xs)} runs, need 4")
         r, why = pearson(xs, ys)
         if r is None:
-            return Measured(f"n/a ({why})", NOT_RUN if len(xs) < 3 else INCONCLUSIVE, mde)
+            return Measured(f"n/a ({why})", NOT_RUN if len(xs) < 3 else INCONCLUSIVE, mde, len(xs) >= 3)
         ci = pearson_interval(r, len(xs))
         if ci is None:
-            return Measured(f"r = {r:+.2f} [n/a: {len(xs)} runs, need 4] (n={len(xs)})", INCONCLUSIVE, mde)
-        v = verdict(claim.direction, *ci, paper=claim.paper)
-        mark = " *" if (ci[0] > 0 or ci[1] < 0) else ""
-        return Measured(f"r = {r:+.2f} [{ci[0]:+.2f}, {ci[1]:+.2f}]{mark} (n={len(xs)})",
-                        verdict_text(v, claim.direction, *ci, claim.paper, 2), mde)
+            return Measured(f"r = {r:+.2f} [n/a: {len(xs)} runs, need 4] (n={len(xs)})", INCONCLUSIVE, mde, True)
+        v = verdict(claim.direction, *ci, paper=claim.paper, decimals=claim.paper_decimals)
+        excludes_zero = ci[0] > 0 or ci[1] < 0
+        return Measured(f"r = {r:+.2f} [{ci[0]:+.2f}, {ci[1]:+.2f}]{' *' if excludes_zero else ''} (n={len(xs)})",
+                        verdict_text(v, claim.direction, *ci, claim.paper, claim.paper_decimals), mde,
+                        not excludes_zero, True)
     ids = res.run_ids(study=claim.study, scene=scene, protocol=protocol)
     a, b = _select(res, ids, claim.row), _select(res, ids, claim.reference)
     va, vb = res.seed_values(a, concrete, sp.scale), res.seed_values(b, concrete, sp.scale)
@@ -142,12 +152,13 @@ def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> Measured:
     text = d.text(sp.decimals)
     mde = _mde_text(d.mde, sp.decimals, d.reason or "no spread")
     if why:
-        return Measured(text + f"; setting dropped: {why}", NOT_TESTABLE, mde)
-    v = verdict(claim.direction, d.lo, d.hi, paper=claim.paper)
+        return Measured(text + f"; setting dropped: {why}", NOT_TESTABLE, mde, interval=d.has_interval)
+    v = verdict(claim.direction, d.lo, d.hi, paper=claim.paper, decimals=claim.paper_decimals)
     why_blind = starved(res, a, claim.inputs)
-    if why_blind and v in (NOT_REPRODUCED, INCONCLUSIVE):   # as for controls: never hides an effect
-        return Measured(text, f"{BLIND}: {why_blind}", mde)
-    return Measured(text, verdict_text(v, claim.direction, d.lo, d.hi, claim.paper, sp.decimals), mde)
+    if why_blind and not d.significant:   # as for controls: an interval that excludes zero is never hidden
+        return Measured(text, f"{BLIND}: {why_blind}", mde, True, d.has_interval)
+    return Measured(text, verdict_text(v, claim.direction, d.lo, d.hi, claim.paper, claim.paper_decimals), mde,
+                    not d.significant, d.has_interval)
 
 
 def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]:
@@ -157,20 +168,23 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
     if not any(res.run_ids(study=c.study) for c in claims):
         return []
     blind = blind_claims(res)
-    rows = []
+    rows, k = [], 0
     for c in claims:
         ids = res.run_ids(study=c.study)
         pairs = scene_protocols(res, ids) if ids else []
-        paper = (f"{c.paper:+.2f}" if c.paper is not None else "–") + (f" ({c.paper_note})" if c.paper_note else "")
+        paper = ((f"{c.paper:+.{c.paper_decimals}f}" if c.paper is not None else "–")
+                 + (f" ({c.paper_note})" if c.paper_note else ""))
         if not pairs:
             rows.append(Row([c.text, c.source, "–"], [Cell(text=paper), Cell(text="study not run"), Cell(text="–"),
                                                       Cell(text=NOT_RUN)]))
             continue
         for sc, pr in pairs:
             m = measure(res, c, sc, pr)
-            # blind replaces only the verdicts that read an absence of effect: an interval that excludes
-            # zero shows the mechanism whatever the control says
-            if c.key in blind and m.verdict.split(":")[0] in (NOT_REPRODUCED, INCONCLUSIVE):
+            k += m.interval
+            # blind replaces only the verdicts whose interval includes zero (a robustness "reproduced" too,
+            # since a blind study also shows no change): an interval that excludes zero shows the mechanism
+            # whatever the control says
+            if c.key in blind and m.no_effect:
                 m.verdict = blind[c.key]
             rows.append(Row([c.text, c.source, f"{sc} ({PROTOCOL_SHORT.get(pr, pr)})"],
                             [Cell(text=paper), Cell(text=m.text), Cell(text=m.mde), Cell(text=m.verdict)]))
@@ -178,16 +192,20 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
             Column("mde", "MDE", "MDE"), Column("verdict", "Verdict", "Verdict")]
     cap = ("Claims of the paper's ablation section against gsbench's measurements: effect = compared row minus "
            "reference row (display units; PSNR in dB, IoU in %), or Pearson r for the lambda claims, with its 95 % "
-           "interval (t interval paired by seed, else Welch; Fisher z for r). MDE = the smallest true effect this "
-           "design detects (two-sided 5 %, 80 % power) from the observed spread at its n. Verdict, for a claim "
+           "interval (t interval paired on the seeds both rows ran, a dropped seed is named; Welch when they share "
+           "none; Fisher z for r). MDE = the smallest true effect this design detects (two-sided 5 % t test, 80 % "
+           "power, exact noncentral t) from the observed spread at its n. Paper numbers are compared at the paper's "
+           "decimals. Verdict, for a claim "
            "with a number: reproduced (interval excludes zero on the paper's side and reaches the paper's value), "
            "smaller than claimed (excludes zero, lies short of the paper's value), not reproduced (contains zero, "
            "lies short of the paper's value; the largest compatible effect is printed), opposite (excludes zero on "
            "the other side), inconclusive (contains zero and the paper's value, or one seed); without a number "
-           "only the side of zero counts; blind = not reproduced or inconclusive while the claim's positive control "
-           "ran and showed no marked effect (table claims_controls), or while the compared row lacked what the "
+           "only the side of zero counts; blind = any verdict whose interval includes zero (robustness 'reproduced' "
+           "too) while the claim's positive control ran and showed no marked effect (table claims_controls), or "
+           "while the compared row lacked what the "
            f"mechanism acts on (for L_ds: an edge map E_d marking under {100 * EDGE_FLOOR:g} % of the pixels); "
            "robustness claims use a "
-           f"+-{ROBUST_MARGIN_DB} dB margin chosen by gsbench; not run = no runs.")
+           f"+-{ROBUST_MARGIN_DB} dB margin chosen by gsbench; not run = no runs. " + family_note(k)
+           + " One interval that excludes zero is weak evidence on its own.")
     return [Table("paper_claims", "Paper claims", cap, ["Claim", "Paper source", "Scene"], cols, rows,
                   section="claims")]

@@ -11,6 +11,10 @@ from gsbench.metric_table import LOGICAL_SPEC, METRICS, MetricSpec
 from gsbench.studies import (AX_FORMULATION, AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY,  # noqa: F401  isort: skip
                              AX_NOISE_TYPE, AX_ORDERING)
 from gsbench.studies import STUDIES as STUDY_TABLE
+from gsbench.studies import column
+
+# the few-view count (train.views) that the depth controls vary beside lambda_depth
+AX_VIEWS = column("train.views")
 
 # Logical metric -> concrete metric name per protocol ("mIoU" of a 3D-OVS scene is miou_3dovs).
 LOGICAL = {

@@ -1,34 +1,42 @@
-"""Differences between two table rows with a 95 % confidence interval, and Pearson r with its
-Fisher-z interval.
+"""Differences between two table rows with a 95 % confidence interval and its p-value, Holm's
+correction for a family of them, and Pearson r with its Fisher-z interval.
 
-Why here: the seed intervals and the paper-claims verdicts must use the same rule. Two rows with
-the same seeds are paired by seed (same seed = same initialisation and priors, so the paired
-difference removes that shared noise); otherwise Welch's unequal-variance t interval is used.
-With fewer than two values on a side there is no interval (shown as n/a, never as zero width).
+Why here: the seed intervals, the paper-claims verdicts and the positive controls must use the same
+rule. Two rows are paired on their shared seeds (a seed present with a finite value on both sides:
+same seed = same initialisation and priors, so the paired difference removes that shared noise); a
+seed on one side only, or with a non-finite value, is dropped and named (`Diff.dropped`). Welch's
+unequal-variance t interval is used only when the rows share no seed (different seeds, or runs without
+one). With fewer than two values on a side there is no interval (shown as n/a, never as zero width).
+The p-value is two-sided, from the same t statistic and degrees of freedom as the interval, so
+"p < 0.05" and "the interval excludes zero" agree.
 
 The minimum detectable effect (MDE) says what a study could have found: the smallest true difference
-a two-sided 5 % test on this design detects with 80 % power, from the observed spread. Paired by seed:
-MDE = (t_{0.975,n-1} + t_{0.80,n-1}) * sd_diff / sqrt(n), the textbook normal-shift approximation with
-t quantiles (the exact non-central t answer is a little larger at very small n). Welch: the same sum of
-quantiles at the Welch-Satterthwaite degrees of freedom times sqrt(sd_a^2/n_a + sd_b^2/n_b). With fewer
-than two values on a side there is no spread to size it from, so no MDE (n/a), never zero.
+a two-sided 5 % t test on this design detects with 80 % power, from the observed spread. It is exact:
+the noncentrality lambda at which the noncentral t (df degrees of freedom) falls beyond the two-sided
+critical value with probability 0.80, times the standard error. Paired: df = n - 1, se = sd_diff /
+sqrt(n); Welch: the Welch-Satterthwaite df, se = sqrt(sd_a^2/n_a + sd_b^2/n_b). With fewer than two
+values on a side there is no spread to size it from, so no MDE (n/a), never zero.
 For a Pearson r: the smallest |r| detected at n runs, tanh((z_{0.975} + z_{0.80}) / sqrt(n - 3)).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy import stats as sps
+from scipy.optimize import brentq
 
 LEVEL = 0.95
+ALPHA = 1.0 - LEVEL
 POWER = 0.80
+_SHOWN_SEEDS = 8  # dropped seeds named in a cell before "+k more"
 
 
 @dataclass
 class Diff:
-    """Mean difference (row minus reference) and its two-sided 95 % interval."""
+    """Mean difference (row minus reference), its two-sided 95 % interval and p-value."""
     delta: float | None = None
     lo: float | None = None
     hi: float | None = None
@@ -37,6 +45,9 @@ class Diff:
     method: str = ""          # "paired" | "welch" | ""
     reason: str | None = None  # why there is no interval (or no difference)
     mde: float | None = None   # minimum detectable effect at this n (module docstring), None = no spread
+    p: float | None = None     # two-sided p-value of the t statistic the interval uses, None = no interval
+    dropped: tuple[int, ...] = ()  # seeds left out: on one side only, or not finite on a side
+    unseeded_dropped: int = 0      # runs without a seed left out of a paired comparison
 
     @property
     def has_interval(self) -> bool:
@@ -67,7 +78,20 @@ class Diff:
         else:
             s += f" [n/a: {self.reason}]"
         tag = f"n={self.n_a}, paired" if self.method == "paired" else f"n={self.n_a} vs {self.n_b}"
-        return s + f" ({tag})"
+        return s + f" ({tag}{self.dropped_text()})"
+
+    def dropped_text(self) -> str:
+        """'; dropped seeds 1, 4' (and runs without a seed), or '' when every value was used."""
+        out = ""
+        if self.dropped:
+            shown = ", ".join(str(s) for s in self.dropped[:_SHOWN_SEEDS])
+            more = len(self.dropped) - _SHOWN_SEEDS
+            plural = "s" if len(self.dropped) > 1 else ""
+            out += f"; dropped seed{plural} {shown}" + (f" +{more} more" if more > 0 else "")
+        if self.unseeded_dropped:
+            n = self.unseeded_dropped
+            out += f"; dropped {n} run{'s' if n > 1 else ''} without a seed"
+        return out
 
 
 def t_quantile(df: float) -> float:
@@ -75,14 +99,60 @@ def t_quantile(df: float) -> float:
     return float(sps.t.ppf(0.5 + LEVEL / 2.0, df))
 
 
-def power_quantile(df: float) -> float:
-    """One-sided quantile of Student's t at the power (80 %) with df degrees of freedom."""
-    return float(sps.t.ppf(POWER, df))
+def t_power(ncp: float, df: float) -> float:
+    """Power of the two-sided 5 % t test at df degrees of freedom when the t statistic is noncentral
+    with noncentrality ncp. The lower tail is read as the upper tail at -ncp: scipy's nct.cdf returns
+    NaN for some far lower tails, its sf does not."""
+    crit = t_quantile(df)
+    power = float(sps.nct.sf(crit, df, ncp)) + float(sps.nct.sf(crit, df, -ncp))
+    if not math.isfinite(power):
+        raise FloatingPointError(f"noncentral t power is not finite at df={df:g}, ncp={ncp:g}")
+    return power
+
+
+@lru_cache(maxsize=512)
+def ncp_for_power(df: float) -> float:
+    """The noncentrality at which the two-sided 5 % t test at df degrees of freedom reaches 80 % power
+    (cached: paired designs repeat the same df)."""
+    hi = t_quantile(df) + float(sps.norm.ppf(POWER)) + 1.0
+    for _ in range(60):  # power rises with ncp towards 1; doubling brackets the root in a few steps
+        if t_power(hi, df) >= POWER:
+            break
+        hi *= 2.0
+    else:
+        raise FloatingPointError(f"no noncentrality reaches {POWER:.0%} power at df={df:g}")
+    return float(brentq(lambda x: t_power(x, df) - POWER, 0.0, hi, xtol=1e-12, rtol=1e-12))
 
 
 def mde_t(se: float, df: float) -> float:
-    """Minimum detectable effect of a t test with standard error se and df degrees of freedom."""
-    return (t_quantile(df) + power_quantile(df)) * se
+    """Minimum detectable effect of a two-sided 5 % t test with standard error se and df degrees of
+    freedom at 80 % power (exact, noncentral t)."""
+    return 0.0 if se == 0.0 else ncp_for_power(float(df)) * se
+
+
+def p_two_sided(t: float, df: float) -> float:
+    """Two-sided p-value of Student's t statistic t at df degrees of freedom (|t| = inf gives 0)."""
+    return min(1.0, 2.0 * float(sps.t.sf(abs(t), df)))
+
+
+def holm(pvalues: list[float]) -> list[float]:
+    """Holm-Bonferroni adjusted p-values, in the input order: the i-th smallest of m is multiplied by
+    m - i + 1, made non-decreasing in that order and capped at 1. A hypothesis is rejected at the family-wise
+    level ALPHA when its adjusted p-value is <= ALPHA."""
+    m = len(pvalues)
+    order = sorted(range(m), key=lambda i: pvalues[i])
+    out = [1.0] * m
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * pvalues[i]))
+        out[i] = running
+    return out
+
+
+def family_note(k: int) -> str:
+    """The family-wise reading of a table's k intervals at 95 %: how many exclude zero by chance alone."""
+    return (f"This table has {k} interval{'s' if k != 1 else ''} at 95 %: when no effect exists, about "
+            f"0.05 · {k} = {ALPHA * k:.1f} of them exclude zero by chance.")
 
 
 def mde_r(n: int) -> float | None:
@@ -103,53 +173,73 @@ def _mean_sd(x: np.ndarray) -> tuple[float, float]:
     return s * float(y.mean()), (s * float(y.std(ddof=1)) if x.size > 1 else 0.0)
 
 
-def compare(a: dict, b: dict) -> Diff:
-    """Row values by seed `a` against reference values by seed `b` (non-finite values ignored).
-    Keys are seeds (int); a run without a seed is keyed by its run id and never paired."""
-    a = {s: float(v) for s, v in a.items() if v is not None and math.isfinite(v)}
-    b = {s: float(v) for s, v in b.items() if v is not None and math.isfinite(v)}
-    out = Diff(n_a=len(a), n_b=len(b))
-    if not a or not b:
-        out.reason = "no value" if not a else "no reference value"
-        return out
-    xa = np.array(list(a.values()), dtype=np.float64)
-    xb = np.array(list(b.values()), dtype=np.float64)
-    (ma, sa), (mb, sb) = _mean_sd(xa), _mean_sd(xb)
-    if set(a) == set(b) and all(isinstance(k, int) for k in a):
-        out.method = "paired"
-        d = np.array([a[k] / 2.0 - b[k] / 2.0 for k in sorted(a)], dtype=np.float64)  # halves: no overflow
-        md, sd = _mean_sd(d)
-        delta = 2.0 * md
-        if d.size < 2:
-            half = mde = None
-        else:
-            se = 2.0 * sd / math.sqrt(d.size)
-            half, mde = t_quantile(d.size - 1) * se, mde_t(se, d.size - 1)
-    else:
-        out.method = "welch"
-        delta = ma - mb
-        if xa.size < 2 or xb.size < 2:
-            half = mde = None
-        else:
-            ea, eb = sa / math.sqrt(xa.size), sb / math.sqrt(xb.size)  # standard errors
-            se = math.hypot(ea, eb)
-            if se == 0.0:  # no spread on either side: the difference is exact
-                half = mde = 0.0
-            else:
-                # Welch-Satterthwaite degrees of freedom, on shares of se (no squares of large values)
-                pa, pb = ea / se, eb / se
-                dof = 1.0 / (pa ** 4 / (xa.size - 1) + pb ** 4 / (xb.size - 1))
-                half, mde = t_quantile(dof) * se, mde_t(se, dof)
+def _finite(values: dict) -> dict:
+    return {k: float(v) for k, v in values.items() if v is not None and math.isfinite(v)}
+
+
+def _seeds(keys) -> set[int]:
+    """The seeds among the keys (a run without a seed is keyed by its run id, a string)."""
+    return {k for k in keys if isinstance(k, int) and not isinstance(k, bool)}
+
+
+def _interval(out: Diff, delta: float, se: float | None, df: float | None, t: float | None) -> Diff:
+    """Fill out's difference, interval, p-value and MDE from delta, its standard error and df (se None:
+    one value on a side, no spread)."""
+    half = None if se is None else t_quantile(df) * se  # type: ignore[arg-type]
     if not math.isfinite(delta) or (half is not None and not math.isfinite(half)):
         out.reason = "difference overflows float64"
         return out
     out.delta = delta
-    out.mde = mde if mde is not None and math.isfinite(mde) else None
-    if half is None:
+    if se is None:
         out.reason = "one seed"
         return out
-    out.lo, out.hi = delta - half, delta + half
+    mde = mde_t(se, df)  # type: ignore[arg-type]
+    out.mde = mde if math.isfinite(mde) else None
+    out.lo, out.hi = delta - half, delta + half  # type: ignore[operator]
+    # se == 0: the difference is exact; any nonzero one is certain, zero is no evidence
+    out.p = p_two_sided(t, df) if t is not None else (0.0 if delta != 0.0 else 1.0)  # type: ignore[arg-type]
     return out
+
+
+def compare(a: dict, b: dict) -> Diff:
+    """Row values by seed `a` against reference values by seed `b` (module docstring: paired on the
+    shared seeds, Welch when there are none). Keys are seeds (int); a run without a seed is keyed by its
+    run id and never paired."""
+    fa, fb = _finite(a), _finite(b)
+    shared = sorted(_seeds(fa) & _seeds(fb))
+    if shared:
+        used_a = used_b = set(shared)
+    else:
+        used_a, used_b = set(fa), set(fb)
+    out = Diff(n_a=len(fa), n_b=len(fb))
+    out.dropped = tuple(sorted((_seeds(a) - used_a) | (_seeds(b) - used_b)))
+    if not fa or not fb:
+        out.reason = "no value" if not fa else "no reference value"
+        return out
+    if shared:
+        out.method, out.n_a, out.n_b = "paired", len(shared), len(shared)
+        out.unseeded_dropped = len(set(fa) - _seeds(fa)) + len(set(fb) - _seeds(fb))  # run ids: never paired
+        d = np.array([fa[k] / 2.0 - fb[k] / 2.0 for k in shared], dtype=np.float64)  # halves: no overflow
+        md, sd = _mean_sd(d)
+        if d.size < 2:
+            return _interval(out, 2.0 * md, None, None, None)
+        half_se = sd / math.sqrt(d.size)
+        t = md / half_se if half_se > 0.0 else None  # the t statistic is scale-free: halves give the same t
+        return _interval(out, 2.0 * md, 2.0 * half_se, d.size - 1, t)
+    out.method = "welch"
+    xa, xb = np.array(list(fa.values())), np.array(list(fb.values()))
+    (ma, sa), (mb, sb) = _mean_sd(xa), _mean_sd(xb)
+    delta = ma - mb
+    if xa.size < 2 or xb.size < 2:
+        return _interval(out, delta, None, None, None)
+    ea, eb = sa / math.sqrt(xa.size), sb / math.sqrt(xb.size)  # standard errors
+    se = math.hypot(ea, eb)
+    if se == 0.0:  # no spread on either side: the difference is exact
+        return _interval(out, delta, 0.0, xa.size + xb.size - 2, None)
+    # Welch-Satterthwaite degrees of freedom, on shares of se (no squares of large values)
+    pa, pb = ea / se, eb / se
+    dof = 1.0 / (pa ** 4 / (xa.size - 1) + pb ** 4 / (xb.size - 1))
+    return _interval(out, delta, se, dof, delta / se if math.isfinite(delta) else None)
 
 
 def pearson(x: list[float], y: list[float]) -> tuple[float | None, str | None]:

@@ -1,20 +1,27 @@
 """Depth-prior providers. Every prior is at the training resolution `size` = (W, H).
 
 - ``gt`` (weight-free, synthetic scenes): the scene's GT depth turned into a disparity-like prior
-  the way a monocular estimator sees it: inverse depth normalised by its median, edges smeared
-  by a Gaussian blur (sigma = ``GT_BLUR_FRAC`` of the image diagonal, at least 0.5 px; invalid
-  pixels count as disparity 0, like sky), then a random per-view scale (log-uniform in
+  the way a monocular estimator makes one. Inverse depth, normalised by its median (invalid pixels
+  count as disparity 0, like sky), is resampled to the estimator's working size (short side
+  ``working_size``, default WORKING_SIZE = 518 as Depth Anything's input; the aspect ratio kept),
+  where its edges are smeared by a Gaussian blur of EDGE_SIGMA_PX working pixels; the result is
+  resized bicubically to `size`, as a real pipeline upsamples its prediction. Edges are thus a few
+  working pixels wide at any output size. Then a random per-view scale (log-uniform in
   ``GT_SCALE_RANGE``) and shift (uniform in ``GT_SHIFT_RANGE``) seeded by (seed, view id). The
   scale and shift differ per view, so the loss's scale-shift alignment is genuinely needed.
   ``distortion`` (severity >= 0, default 1) adds what a scale-shift fit cannot remove, as
   monocular estimators do: a low-frequency per-view multiplicative warp of the disparity,
   exp(DIST_PER_SEVERITY * severity * f) with f a smooth unit-std field (a DIST_GRID random grid
-  upsampled bicubically), and extra edge smearing (blur sigma grows by SMEAR_PER_SEVERITY of the
-  diagonal per severity, at most one diagonal). Severity 0 is the plain scale-shift model.
-  Kind ``disparity``; valid where the GT depth is.
+  upsampled bicubically), and extra edge smearing (the blur sigma grows by SMEAR_PX_PER_SEVERITY
+  working pixels per severity, at most MAX_SIGMA_FRAC of the working short side). Severity 0 is
+  the plain scale-shift model. Kind ``disparity``; valid where the GT depth (nearest-resized to
+  `size`) is.
 - ``sparse``: the scene's sparse points projected into each view with a z-buffer (nearest point
   per pixel). Kind ``depth``; valid only at pixels a point lands on. There are no per-point
   visibility tracks, so a point behind a surface that has no points of its own can show through.
+- ``sfm`` (weight-free, real photos): the sparse points, with a visibility test, densified by an
+  edge-aware filter guided by the photo (`gsbench.priors.sfm_depth`). Kind ``disparity`` (relative);
+  valid where points support it. The recorded id ends in ``+tracks`` or ``+zbuffer`` (visibility).
 - ``depth-anything``: Depth Anything through transformers (AutoModelForDepthEstimation and its
   image processor) from a local model folder, never downloading. It sees the full-resolution
   image; its relative-disparity output is resized bicubically to `size`. Kind ``disparity``.
@@ -34,23 +41,26 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
-from gsbench.config import check_key
+from gsbench.config import check_key, setting
 from gsbench.datasets.noise import apply_noise
 from gsbench.device import default_device
 from gsbench.errors import InputError
+from gsbench.priors import sfm_depth as SFM
 from gsbench.priors import warp as W
 from gsbench.priors.weights import require_weights
 from gsbench.resize import resize_nearest
 
-DEPTH_PROVIDERS = ("gt", "sparse", "depth-anything", "none")
+DEPTH_PROVIDERS = ("gt", "sparse", "sfm", "depth-anything", "none")
 DEPTH_KINDS = ("disparity", "depth", "metric")
-GT_BLUR_FRAC = 0.005
+WORKING_SIZE = 518          # short side of the simulated estimator's working image (pixels)
+EDGE_SIGMA_PX = 0.5         # edge blur at severity 0, in working pixels (see docs/priors.md)
+SMEAR_PX_PER_SEVERITY = 0.5  # extra edge blur per unit of distortion, in working pixels
+MAX_SIGMA_FRAC = 0.1        # the blur's cap, as a share of the working short side
 GT_SCALE_RANGE = (0.5, 2.0)
 GT_SHIFT_RANGE = (0.0, 0.5)
-GT_VERSION = 2
+GT_VERSION = 3              # 3: blur and distortion at the working size, bicubic to the output size
 DIST_PER_SEVERITY = 0.1
 DIST_GRID = (3, 4)
-SMEAR_PER_SEVERITY = 0.004
 SPARSE_VERSION = 1
 DA_VERSION = 1
 
@@ -86,26 +96,53 @@ def smooth_field(shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray
     return f / sd if sd > 1e-12 else f
 
 
-def gt_disparity_prior(depth: np.ndarray, rng: np.random.Generator, distortion: float = 0.0
+def working_shape(shape: tuple[int, int], short_side: int = WORKING_SIZE) -> tuple[int, int]:
+    """(H, W) of the estimator's working image for an image of `shape` (H, W): short side
+    `short_side`, the aspect ratio kept."""
+    H, Wd = int(shape[0]), int(shape[1])
+    if H < 1 or Wd < 1:
+        raise ValueError(f"working_shape: empty image shape {shape}")
+    k = float(short_side) / min(H, Wd)
+    return max(1, int(round(H * k))), max(1, int(round(Wd * k)))
+
+
+def resample_disparity(disp: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """`disp` at `shape` (H, W): area averaging when shrinking (a resized input image's edges are one
+    pixel wide), bilinear when enlarging, unchanged at the same shape."""
+    H, Wd = shape
+    if disp.shape == (H, Wd):
+        return disp
+    shrink = H * Wd < disp.shape[0] * disp.shape[1]
+    return cv2.resize(disp, (Wd, H), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+
+
+def gt_disparity_prior(depth: np.ndarray, rng: np.random.Generator, distortion: float = 0.0,
+                       size: tuple[int, int] | None = None, working_size: int = WORKING_SIZE
                        ) -> tuple[np.ndarray, np.ndarray]:
-    """Estimator-like disparity from a GT z map (see module doc): (values float32, valid bool)."""
+    """Estimator-like disparity at `size` (W, H; default the depth's) from a GT z map (see module
+    doc): (values float32, valid bool)."""
     z = np.asarray(depth, dtype=np.float64)
-    valid = np.isfinite(z) & (z > W.NEAR)
-    if not valid.any():
-        return np.zeros(z.shape, np.float32), valid
+    Wo, Ho = (z.shape[1], z.shape[0]) if size is None else (int(size[0]), int(size[1]))
+    ok = np.isfinite(z) & (z > W.NEAR)
+    zo = resize_nearest(z, Wo, Ho)
+    valid = np.isfinite(zo) & (zo > W.NEAR)
+    if not ok.any() or not valid.any():
+        return np.zeros((Ho, Wo), np.float32), valid
     disp = np.zeros_like(z)
-    disp[valid] = 1.0 / z[valid]
-    med = float(np.median(disp[valid]))
+    disp[ok] = 1.0 / z[ok]
+    med = float(np.median(disp[ok]))
     disp /= med if med > 0 else 1.0
-    H, Wd = z.shape
-    diag = float(np.hypot(H, Wd))
-    sigma = min(diag, max(0.5, GT_BLUR_FRAC * diag + SMEAR_PER_SEVERITY * distortion * diag))
+    work = working_shape(z.shape, working_size)
+    disp = resample_disparity(disp, work)
+    sigma = min(MAX_SIGMA_FRAC * min(work), EDGE_SIGMA_PX + SMEAR_PX_PER_SEVERITY * distortion)
     disp = cv2.GaussianBlur(disp, (0, 0), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REPLICATE)
     lo, hi = np.log(GT_SCALE_RANGE[0]), np.log(GT_SCALE_RANGE[1])
     scale = float(np.exp(rng.uniform(lo, hi)))
     shift = float(rng.uniform(*GT_SHIFT_RANGE))
-    field = smooth_field((H, Wd), rng)            # drawn always: the knob does not shift the stream
+    field = smooth_field(work, rng)               # drawn always: the knob does not shift the stream
     disp = disp * np.exp(np.clip(DIST_PER_SEVERITY * distortion * field, -20.0, 20.0))
+    if disp.shape != (Ho, Wo):                    # the prediction resized as a real pipeline does it
+        disp = cv2.resize(disp, (Wo, Ho), interpolation=cv2.INTER_CUBIC)
     return (scale * disp + shift).astype(np.float32), valid
 
 
@@ -160,15 +197,23 @@ def distortion_of(depth_cfg: Mapping) -> float:
     return float(check_key("priors.depth.distortion", depth_cfg.get("distortion", 1.0)))
 
 
+def working_size_of(depth_cfg: Mapping) -> int:
+    """The `priors.depth.working_size` (short side in pixels) of the gt provider (default.yaml's if unset)."""
+    key = "priors.depth.working_size"
+    return int(check_key(key, depth_cfg["working_size"] if "working_size" in depth_cfg else setting({}, key)))
+
+
 def depth_provider_id(depth_cfg: Mapping) -> str | None:
     """The id recorded in results (before noise); None for ``none``. Real ids need the model."""
     p = depth_cfg.get("provider", "gt")
     if p in (None, "none"):
         return None
     if p == "gt":
-        return f"gt-sim-disparity-v{GT_VERSION}:d{distortion_of(depth_cfg):g}"
+        return f"gt-sim-disparity-v{GT_VERSION}:d{distortion_of(depth_cfg):g}:w{working_size_of(depth_cfg)}"
     if p == "sparse":
         return f"sparse-points-v{SPARSE_VERSION}"
+    if p == "sfm":
+        return f"sfm-fgs-v{SFM.SFM_VERSION}"
     if p == "depth-anything":
         mp = depth_cfg.get("model_path")
         return f"depth-anything:{Path(mp).resolve().name if mp else '?'}"
@@ -187,10 +232,10 @@ def compute_depth(scene, depth_cfg: Mapping, view_ids: Sequence[int], size: tupl
         if not scene.has_depth:
             raise InputError(f"{scene.path}: priors.depth.provider=gt needs GT depth and the scene has none "
                              "(use sparse or depth-anything)")
-        distortion = distortion_of(depth_cfg)
-        for v in bar(view_ids):
-            z = resize_nearest(np.asarray(scene.gt_depth(v), dtype=np.float32), *size)
-            vals, valid = gt_disparity_prior(z, view_rng(seed, v, "gt-depth"), distortion)
+        distortion, working = distortion_of(depth_cfg), working_size_of(depth_cfg)
+        for v in bar(view_ids):   # from the full-size GT depth: the estimator sees the full image
+            vals, valid = gt_disparity_prior(scene.gt_depth(v), view_rng(seed, v, "gt-depth"), distortion,
+                                             size, working)
             out[v] = DepthPrior(vals, valid, "disparity", pid)
     elif p == "sparse":
         if not scene.has_points:
@@ -198,6 +243,17 @@ def compute_depth(scene, depth_cfg: Mapping, view_ids: Sequence[int], size: tupl
         for v in bar(view_ids):
             vals, valid = sparse_depth_prior(scene.points, W.camera_at(scene.cameras[v], size))
             out[v] = DepthPrior(vals, valid, "depth", pid)
+    elif p == "sfm":
+        if not scene.has_points:
+            raise InputError(f"{scene.path}: priors.depth.provider=sfm needs sparse points and the scene has none "
+                             "(run `gsbench points` on it)")
+        tracks = SFM.point_tracks(scene)
+        sid = f"{pid}+{SFM.visibility_source(tracks)}"
+        for v in bar(view_ids):
+            track = None if tracks is None else tracks.get(v, np.zeros(0, np.int64))
+            vals, valid = SFM.sfm_depth_prior(scene.points, W.camera_at(scene.cameras[v], size), scene.image(v),
+                                              track)
+            out[v] = DepthPrior(vals, valid, "disparity", sid)
     elif p == "depth-anything":
         model = DepthAnything(depth_cfg.get("model_path"), device)
         for v in bar(view_ids):

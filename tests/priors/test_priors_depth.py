@@ -22,7 +22,7 @@ def test_gt_prior_is_disparity_up_to_per_view_scale_and_shift():
     scene = make_sphere_scene(4, 96, 72)
     p = prepare_priors(scene, {"depth": {"provider": "gt", "distortion": 0}}, [0, 3, 5], (96, 72), None, True,
                        False, False, seed=0, progress=False)
-    assert p.providers["depth"] == "gt-sim-disparity-v2:d0"
+    assert p.providers["depth"] == "gt-sim-disparity-v3:d0:w518"
     coefs = []
     for v in (0, 3, 5):
         dp = p.depth[v]

@@ -269,7 +269,8 @@ def test_controls_mark_and_blind(tmp_path: Path):
         # few-view depth control: lambda 1 is 2 dB above lambda 0 on every seed (+-0.01): marked
         for lam, psnr in ((0.0, 20.0), (1.0, 22.0)):
             write_run(tmp_path, f"cd/{lam}_{s}", method="gaussiands", scene="bench", seed=s, study="control_depth",
-                      grid={"gaussiands.lambdas.depth": lam}, metrics={"psnr": psnr + SEED_NOISE[s] + 0.01 * s})
+                      grid={"train.views": 3, "gaussiands.lambdas.depth": lam},
+                      metrics={"psnr": psnr + SEED_NOISE[s] + 0.01 * s})
         # L_ds control: +5, -5, +5 mBIoU points around the same mean: unmarked
         for ds in (False, True):
             mb = 0.6 + (0.05 * (-1) ** s if ds else 0.0)
@@ -284,8 +285,9 @@ def test_controls_mark_and_blind(tmp_path: Path):
     res = Results(collect(tmp_path))
     t = controls_table(res)[0]
     marks = {(r.labels[1], r.labels[3]): r.cells[1].plain() for r in t.rows}
-    assert marks[("control_depth (PSNR (dB))", "depth=1 vs depth=0")] == MARKED
-    assert marks[("control_depth (Depth AbsRel (%))", "depth=1 vs depth=0")] == "not run"  # no depth_absrel
+    assert marks[("control_depth (PSNR (dB))", "views=3, depth=1 vs depth=0")] == MARKED
+    assert marks[("control_depth (Depth AbsRel, covered px (%))",
+                  "views=3, depth=1 vs depth=0")] == "not run"  # no depth_absrel_covered
     assert marks[("control_ds (mBIoU (%))", "ds=True vs ds=False")] == UNMARKED
     full = full_rows(res)
     # +1, -1, +1 points: the interval contains zero and lies short of +37.30 (not reproduced), but the
@@ -318,7 +320,8 @@ def test_dose_band_hand_computed_and_figure(tmp_path: Path):
     for s in (0, 1):
         for lam, psnr in ((0.0, 20.0), (0.1, 21.0), (1.0, 22.0)):
             write_run(tmp_path / "runs", f"cd/{lam}_{s}", method="gaussiands", scene="bench", seed=s,
-                      study="control_depth", grid={"gaussiands.lambdas.depth": lam}, metrics={"psnr": psnr + s})
+                      study="control_depth", grid={"train.views": 3, "gaussiands.lambdas.depth": lam},
+                      metrics={"psnr": psnr + s})
     res = Results(collect(tmp_path / "runs"))
     dose = next(d for d in DOSES if d.study == "control_depth" and d.metric == "psnr")
     paths = plot_dose(res, dose, tmp_path / "dose")

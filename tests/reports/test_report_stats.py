@@ -1,5 +1,6 @@
 """Intervals of the report: paired and Welch t intervals against hand-computed values with tabulated
-t quantiles (not scipy), Fisher-z interval of Pearson r, one-seed and extreme cases."""
+t quantiles (not scipy), the exact MDE against statsmodels' values, Fisher-z interval of Pearson r,
+one-seed and extreme cases."""
 from __future__ import annotations
 
 import math
@@ -15,19 +16,20 @@ T_TABLE = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776}
 T80_TABLE = {2: 1.061, 3: 0.978, 4: 0.941}
 
 
-def test_mde_paired_hand_computed():
-    # differences 1, 2, 3: sd_diff = 1, n = 3, df = 2: (4.303 + 1.061) * 1 / sqrt(3) = 5.364 / 1.7321 = 3.0969
+def test_mde_paired_exact():
+    # differences 1, 2, 3: sd_diff = 1, n = 3. Exact noncentral t: 3.2640 (statsmodels TTestPower, nobs 3);
+    # the normal-shift sum of quantiles (4.303 + 1.061) / sqrt(3) = 3.0969 is 5 % short of it
     d = compare({0: 11.0, 1: 12.0, 2: 13.0}, {0: 10.0, 1: 10.0, 2: 10.0})
     assert d.method == "paired"
-    assert d.mde == pytest.approx(3.0969, rel=2e-4)
-    assert d.mde == pytest.approx((T_TABLE[2] + T80_TABLE[2]) / math.sqrt(3), rel=2e-4)
+    assert d.mde == pytest.approx(3.2640, rel=1e-4)
+    assert d.mde > (T_TABLE[2] + T80_TABLE[2]) / math.sqrt(3) * 1.05
 
 
-def test_mde_welch_hand_computed():
-    # sd 1 on both sides, n = 3 each, unpaired: se = sqrt(1/3 + 1/3) = 0.8165, Welch df = 4:
-    # (2.776 + 0.941) * 0.8165 = 3.0349
+def test_mde_welch_exact():
+    # sd 1 on both sides, n = 3 each, unpaired: Welch df = 4 = the pooled df, so the exact MDE is
+    # statsmodels TTestIndPower's effect size at nobs1 = 3, ratio 1: 3.0709 (times sd = 1)
     d = compare({0: 1.0, 1: 2.0, 2: 3.0}, {3: 3.0, 4: 4.0, 5: 5.0})
-    assert d.method == "welch" and d.mde == pytest.approx(3.0349, rel=2e-4)
+    assert d.method == "welch" and d.mde == pytest.approx(3.0709, rel=1e-4)
 
 
 def test_mde_needs_two_values_and_pearson_mde():
