@@ -10,6 +10,7 @@ import torch
 
 from gsbench import stress
 from gsbench.cli import main
+from gsbench.hostile import hostile_cases
 
 REQUIRED_COMPONENTS = ["render:torch", "projection", "depth-solve", "loss:rec", "loss:depth", "loss:tv", "loss:sem",
                        "loss:ds", "stiff-lambdas", "autoencoder", "metrics"]
@@ -130,6 +131,8 @@ def test_full_battery_passes_via_the_executable(tmp_path):
     assert proc.returncode == 0, proc.stdout[-4000:]
     df = pd.read_csv(tmp_path / "stress.csv")
     cases, skipped = stress.all_cases()
-    assert len(df) == len(cases) + len(skipped) and not skipped
+    hostile = hostile_cases()
+    assert len(df) == len(cases) + len(hostile) + len(skipped) and not skipped
     assert df["pass"].all()
     assert set(REQUIRED_COMPONENTS) <= set(df["component"])
+    assert {f"hostile:{a}" for a in ("config", "data", "eval", "output")} <= set(df["component"])
