@@ -43,7 +43,7 @@ def format_table(rows: list[dict]) -> str:
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
-    from gsbench.hostile import hostile_cases  # lazy: start-up (cli loads all commands)
+    from gsbench.commands.hostile import hostile_cases  # lazy: start-up (cli loads all commands)
     from gsbench.stress import all_cases, run_case  # lazy: start-up (cli loads all commands)
 
     cases, skipped = all_cases(args.component)

@@ -12,12 +12,12 @@ import time
 import pytest
 
 from gsbench import config, store
+from gsbench.commands.hostile import run_hostile
+from gsbench.commands.hostile.config import CASES, alias_bomb
 from gsbench.config import load_config, load_yaml, load_yaml_file
 from gsbench.config_keys import RULES
 from gsbench.errors import InputError
 from gsbench.grids import load_grid
-from gsbench.hostile import run_hostile
-from gsbench.hostile.config import CASES, alias_bomb
 from gsbench.store import json_depth, read_json, read_jsonl
 
 # ------------------------------------------------------------------------------------ YAML

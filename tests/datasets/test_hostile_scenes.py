@@ -1,6 +1,6 @@
 """Scene folders checked before use: cameras, poses, labels, polygons, paths and image sizes.
 
-Every corruption of gsbench/hostile/data.py is answered twice: `gsbench data check` lists it as a
+Every corruption of gsbench/commands/hostile/data.py is answered twice: `gsbench data check` lists it as a
 problem (exit 1) and `gsbench train` stops with one line (exit 1). Hand-computed cases pin the
 camera check, the fill work of a polygon and the pixel budget.
 """
@@ -18,13 +18,13 @@ import pytest
 
 from gsbench.camera import intrinsics_problems, pose_problems, quaternion_matrix
 from gsbench.cli import main
+from gsbench.commands.hostile import run_hostile
+from gsbench.commands.hostile.data import CASES, CORRUPTIONS, LABEL, TRAIN_ARGS, VIEW, nerf_scene, png_header
 from gsbench.datasets import load_scene
 from gsbench.datasets.imageio import image_size
 from gsbench.datasets.label_limits import MAX_FILL_WORK, fill_work, label_problems, max_points
 from gsbench.datasets.ovs import LabelObject, polygons_to_mask
 from gsbench.errors import InputError
-from gsbench.hostile import run_hostile
-from gsbench.hostile.data import CASES, CORRUPTIONS, LABEL, TRAIN_ARGS, VIEW, nerf_scene, png_header
 
 
 @pytest.fixture()
@@ -230,6 +230,6 @@ def test_pixel_budget_without_warning_noise(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=[h.name for h in CASES])
 def test_hostile_data_battery(case):
-    """Each hostile:data case through the battery's own runner (gsbench.hostile.run_hostile)."""
+    """Each hostile:data case through the battery's own runner (gsbench.commands.hostile.run_hostile)."""
     r = run_hostile(case)
     assert r.passed, r.note

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from PIL import Image, ImageFile
 
+from gsbench.commands.hostile import run_hostile
+from gsbench.commands.hostile.eval import CASES, write_zero_png
 from gsbench.errors import InputError
 from gsbench.evaluation import score_mask_folder
 from gsbench.evaluation.mask_files import image_size
-from gsbench.hostile import run_hostile
-from gsbench.hostile.eval import CASES, write_zero_png
 
 H, W = 16, 20
 
@@ -200,6 +200,6 @@ def test_not_an_image_is_refused(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=[h.name for h in CASES])
 def test_hostile_eval_battery(case):
-    """Each hostile:eval case through the real CLI (gsbench.hostile.run_hostile)."""
+    """Each hostile:eval case through the real CLI (gsbench.commands.hostile.run_hostile)."""
     r = run_hostile(case)
     assert r.passed, r.note

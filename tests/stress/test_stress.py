@@ -10,7 +10,7 @@ import torch
 
 from gsbench import stress
 from gsbench.cli import main
-from gsbench.hostile import hostile_cases
+from gsbench.commands.hostile import hostile_cases
 
 REQUIRED_COMPONENTS = ["render:torch", "projection", "depth-solve", "loss:rec", "loss:depth", "loss:tv", "loss:sem",
                        "loss:ds", "stiff-lambdas", "autoencoder", "metrics"]

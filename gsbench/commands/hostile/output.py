@@ -2,7 +2,7 @@
 
 A folder that holds someone else's files is refused, or with --force written beside them; nothing
 a command did not write is ever deleted or overwritten; a second writer into a folder fails with one
-line naming the first (the battery: gsbench/hostile/__init__.py; the rule: gsbench/outdir.py).
+line naming the first (the battery: gsbench/commands/hostile/__init__.py; the rule: gsbench/outdir.py).
 """
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 from typing import Callable, Optional
 
+from gsbench.commands.hostile import Hostile, _base_dir, tiny_run
 from gsbench.grids.claims import CLAIM_GRIDS
-from gsbench.hostile import Hostile, _base_dir, tiny_run
 
 ME_JPG = b"\xff\xd8\xff\xe0 a holiday picture"
 THESIS = "\\section{Results} my own words\n"

@@ -1,5 +1,5 @@
 """Hostile inputs: predicted masks and the scoring of gsbench eval --masks (the battery:
-gsbench/hostile/__init__.py).
+gsbench/commands/hostile/__init__.py).
 
 Masks in another value convention (0/1, 16-bit, float TIFF, a palette map) must be read right (the
 case checks mIoU 1 for predictions equal to the GT) or refused naming the file and its values; sizes
@@ -19,7 +19,7 @@ from typing import Callable, Optional
 import numpy as np
 from PIL import Image
 
-from gsbench.hostile import Hostile, tiny_scene
+from gsbench.commands.hostile import Hostile, tiny_scene
 
 LABELS = Path("label") / "tabletop-small"
 FRAME = "frame_00001"

@@ -1,5 +1,5 @@
 """Hostile inputs: scene folders: cameras, poses, labels, polygons, paths, images (the battery:
-gsbench/hostile/__init__.py).
+gsbench/commands/hostile/__init__.py).
 
 Each corruption edits a copy of the tiny scene (tabletop-small: COLMAP cameras, poses_bounds.npy,
 3D-OVS masks, LERF-OVS labels, gsbench_scene.json) and names what the error must say. The battery
@@ -18,8 +18,8 @@ from typing import Callable
 
 import numpy as np
 
+from gsbench.commands.hostile import Hostile, tiny_scene
 from gsbench.datasets.colmap import read_colmap
-from gsbench.hostile import Hostile, tiny_scene
 
 VIEW = "frame_00003.png"         # the view most corruptions break (index 2)
 LABEL = Path("label") / "tabletop-small" / "frame_00003.json"

@@ -165,10 +165,10 @@ def run_hostile(h: Hostile) -> CaseResult:
 
 def hostile_cases() -> list[Case]:
     """Every hostile case as a battery Case (component "hostile:AREA")."""
-    from gsbench.hostile.config import CASES as config_cases  # lazy: the area modules import this one
-    from gsbench.hostile.data import CASES as data_cases  # lazy: the area modules import this one
-    from gsbench.hostile.eval import CASES as eval_cases  # lazy: the area modules import this one
-    from gsbench.hostile.output import CASES as output_cases  # lazy: the area modules import this one
+    from gsbench.commands.hostile.config import CASES as config_cases  # lazy: the area modules import this one
+    from gsbench.commands.hostile.data import CASES as data_cases  # lazy: the area modules import this one
+    from gsbench.commands.hostile.eval import CASES as eval_cases  # lazy: the area modules import this one
+    from gsbench.commands.hostile.output import CASES as output_cases  # lazy: the area modules import this one
     out = []
     for h in [*config_cases, *data_cases, *eval_cases, *output_cases]:
         out.append(Case(f"hostile:{h.area}", h.name, functools.partial(run_hostile, h)))

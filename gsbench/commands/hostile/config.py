@@ -1,5 +1,5 @@
 """Hostile inputs: configs, presets, grid files, YAML and JSON documents, run folders' config.json (the battery:
-gsbench/hostile/__init__.py).
+gsbench/commands/hostile/__init__.py).
 
 Every YAML text is read by gsbench.config.load_yaml (a size, a node count with aliases expanded, a depth)
 and every JSON file by gsbench.store.read_json (a size, a depth); config values are held to their rules
@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from gsbench.collect import read_collected
+from gsbench.commands.hostile import Hostile, tiny_run, tiny_scene
 from gsbench.config import MAX_YAML_DEPTH, MAX_YAML_NODES
-from gsbench.hostile import Hostile, tiny_run, tiny_scene
 from gsbench.store import MAX_JSON_BYTES, MAX_JSON_DEPTH
 
 AREA = "config"
