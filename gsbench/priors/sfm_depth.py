@@ -42,6 +42,7 @@ from scipy.spatial import cKDTree
 
 from gsbench.camera import Camera
 from gsbench.datasets.colmap import find_model_dir
+from gsbench.errors import InputError
 from gsbench.priors.warp import NEAR
 
 log = logging.getLogger(__name__)
@@ -162,6 +163,11 @@ def _splat(uv: np.ndarray, disp: np.ndarray, size: tuple[int, int]) -> tuple[np.
 
 
 def _smooth(guide: np.ndarray, x: np.ndarray) -> np.ndarray:
+    if not hasattr(cv2, "ximgproc"):
+        # opencv-python(-headless) installed beside or after opencv-contrib-python-headless shadows it
+        raise InputError(f"priors.depth.provider=sfm needs OpenCV's contrib module ximgproc, which the cv2 at "
+                         f"{getattr(cv2, '__file__', '?')} lacks: pip uninstall opencv-python opencv-python-headless, "
+                         f"then pip install --force-reinstall opencv-contrib-python-headless")
     return cv2.ximgproc.fastGlobalSmootherFilter(guide, x.astype(np.float32), FGS_LAMBDA, FGS_SIGMA_COLOR
                                                  ).astype(np.float64)
 

@@ -7,6 +7,7 @@ kinds, ids, cache, crops fed to the model, mask propagation over the ordered fra
 """
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -54,12 +55,16 @@ def test_depth_anything_from_local_folder(tiny_depth_anything, tmp_path):
         d = p.depth[v]
         assert d.kind == "disparity" and d.values.shape == (30, 40) and np.isfinite(d.values).all()
         assert d.valid.all()
-    # reference: the same tiny model run by hand through its processor, resized to (30, 40)
+    # reference: the same tiny model run by hand through its processor, resized to (30, 40), on the
+    # device the provider picks (CUDA where present: its TF32 convolutions differ from the CPU's ~1e-3)
+    dev = "cuda" if torch.cuda.is_available() else "cpu"
     proc = transformers.AutoImageProcessor.from_pretrained(folder, local_files_only=True)
     u8 = np.clip(np.rint(scene.image(1) * 255), 0, 255).astype(np.uint8)
     with torch.no_grad():
-        ref = model(**proc(images=u8, return_tensors="pt")).predicted_depth
+        inputs = {k: v.to(dev) for k, v in proc(images=u8, return_tensors="pt").items()}
+        ref = copy.deepcopy(model).to(dev)(**inputs).predicted_depth
         ref = torch.nn.functional.interpolate(ref[:, None], size=(30, 40), mode="bicubic", align_corners=False)[0, 0]
+        ref = ref.cpu()
     assert np.allclose(p.depth[1].values, ref.numpy(), rtol=1e-4, atol=1e-6 * float(ref.abs().max() + 1e-12))
     q = prepare_priors(scene, cfg, [0, 1], (40, 30), tmp_path, True, False, False, progress=False)
     assert q.cache["depth"]["hit"]

@@ -82,6 +82,15 @@ def test_points_on_a_tilted_plane_give_its_disparity_up_to_affine():
     assert valid.mean() > 0.9 and np.median(rel) < 0.01 and rel.max() < 0.1
 
 
+def test_a_cv2_without_contrib_is_a_clear_error(monkeypatch):
+    """opencv-python installed after opencv-contrib-python-headless shadows ximgproc: the error says so."""
+    monkeypatch.delattr(S.cv2, "ximgproc", raising=False)
+    cam = _camera()
+    pts = _on_pixels(cam, _plane_z(3.0, 0.3, -0.4), 400)
+    with pytest.raises(InputError, match=r"priors.depth.provider=sfm needs OpenCV's contrib module ximgproc"):
+        S.sfm_depth_prior(pts, cam, np.full((H_, W_, 3), 0.5, np.float32))
+
+
 def test_a_depth_step_stays_sharp_where_the_photo_has_the_edge():
     cam = _camera()
     step = lambda x, y: np.where(x < 0, 2.0, 4.0)   # noqa: E731  left half near, right half far
