@@ -40,20 +40,26 @@ def gsbench_version() -> Optional[str]:
         return None
 
 
-def git_sha() -> Optional[str]:
-    """HEAD commit of the gsbench checkout this code runs from; None when the package folder is not in
-    a git work tree of gsbench (e.g. a wheel install) or git is missing. Read-only (`git rev-parse`)."""
+def git_state() -> tuple[Optional[str], Optional[bool]]:
+    """(HEAD commit, whether tracked files differ from it) of the gsbench checkout this code runs from;
+    (None, None) when the package folder is not in a git work tree of gsbench (e.g. a wheel install) or
+    git is missing. A run from uncommitted code is then not credited to HEAD alone. Read-only."""
     pkg = Path(__file__).resolve().parent
+
+    def git(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(["git", *args], cwd=pkg, capture_output=True, text=True, timeout=5)
     try:
-        top = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=pkg, capture_output=True, text=True,
-                             timeout=5)
+        top = git("rev-parse", "--show-toplevel")
         if top.returncode != 0 or Path(top.stdout.strip()).resolve() != pkg.parent:
-            return None
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=pkg, capture_output=True, text=True, timeout=5)
+            return None, None
+        head = git("rev-parse", "HEAD")
+        status = git("status", "--porcelain", "--untracked-files=no")
     except (OSError, subprocess.SubprocessError):
-        return None
+        return None, None
     sha = head.stdout.strip()
-    return sha if head.returncode == 0 and sha else None
+    if head.returncode != 0 or not sha:
+        return None, None
+    return sha, (bool(status.stdout.strip()) if status.returncode == 0 else None)
 
 
 def package_version(name: str) -> Optional[str]:
@@ -96,10 +102,11 @@ def env_info() -> dict:
     import numpy as np
     import torch
     cuda = torch.cuda.get_device_name(torch.cuda.current_device()) if torch.cuda.is_available() else None
+    sha, dirty = git_state()
     return {"host": socket.gethostname(), "cpu": platform.processor() or platform.machine(),
             "cores": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
             "torch": torch.__version__, "numpy": np.__version__, "torch_threads": torch.get_num_threads(),
-            "cuda": cuda, "gsbench": gsbench_version(), "git_sha": git_sha(), **cpu_facts(),
+            "cuda": cuda, "gsbench": gsbench_version(), "git_sha": sha, "git_dirty": dirty, **cpu_facts(),
             "numba": package_version("numba"), "numerics_version": NUMERICS_VERSION}
 
 

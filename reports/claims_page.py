@@ -103,7 +103,9 @@ def machines(cells: Iterable[Published]) -> list[tuple[str, int]]:
     counts: dict[str, int] = {}
     for c in cells:
         p = c.record["provenance"]
-        line = (f"commit {str(p.get('gsbench_commit') or 'unknown')[:12]}, numerics version {c.numerics_version}, "
+        dirty = " with uncommitted changes" if p.get("gsbench_commit_dirty") is True else ""
+        line = (f"commit {str(p.get('gsbench_commit') or 'unknown')[:12]}{dirty}, "
+                f"numerics version {c.numerics_version}, "
                 f"{p.get('cpu_model') or 'unknown CPU'} ({p.get('physical_cores') or '?'} cores, "
                 f"{p.get('torch_threads') or '?'} threads), torch {p.get('torch')}, numba {p.get('numba')}, "
                 f"numpy {p.get('numpy')}, threading layer {p.get('numba_threading_layer')}")

@@ -247,7 +247,8 @@ def provenance(env: dict, summary: dict, results: dict, finished: Optional[float
     """Who and what computed a cell: commit, machine, versions, date and wall times."""
     date = (_dt.datetime.fromtimestamp(finished, _dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
             if isinstance(finished, (int, float)) and math.isfinite(finished) else None)
-    return {"gsbench_commit": env.get("git_sha"), "gsbench_version": env.get("gsbench"),
+    return {"gsbench_commit": env.get("git_sha"), "gsbench_commit_dirty": env.get("git_dirty"),
+            "gsbench_version": env.get("gsbench"),
             "numerics_version": env.get("numerics_version"), "cpu_model": env.get("cpu_model"),
             "cpu_flags": env.get("cpu_flags"), "physical_cores": env.get("physical_cores"),
             "logical_cpus": env.get("cores"), "torch_threads": env.get("torch_threads"), "host": env.get("host"),

@@ -198,8 +198,32 @@ def test_results_machine_records_git_sha(tmp_path):
     if (root / ".git").exists():
         head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True).stdout.strip()
         assert on_disk["git_sha"] == head and len(head) == 40
+        changed = subprocess.run(["git", "diff", "HEAD", "--quiet"], cwd=root).returncode == 1
+        assert on_disk["git_dirty"] is changed      # uncommitted code is not credited to HEAD alone
     else:
-        assert on_disk["git_sha"] is None
+        assert on_disk["git_sha"] is None and on_disk["git_dirty"] is None
+
+
+def test_git_dirty_follows_an_edit_of_a_tracked_file(tmp_path):
+    """git_state() in a throw-away repository holding gsbench/environment.py: clean after the commit,
+    dirty once a tracked file changes, and an untracked file does not count."""
+    clone = tmp_path / "clone"
+    (clone / "gsbench").mkdir(parents=True)
+    (clone / "gsbench" / "environment.py").write_text((REPO_ROOT / "gsbench" / "environment.py").read_text())
+    (clone / "gsbench" / "__init__.py").write_text("")
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-c", "commit.gpgsign=false"]
+    subprocess.run([*git, "init", "-q"], cwd=clone, check=True)
+    subprocess.run([*git, "add", "-A"], cwd=clone, check=True)
+    subprocess.run([*git, "commit", "-q", "-m", "x"], cwd=clone, check=True)
+    code = ("import importlib.util,sys;s=importlib.util.spec_from_file_location('e',sys.argv[1]);"
+            "m=importlib.util.module_from_spec(s);s.loader.exec_module(m);print(m.git_state()[1])")
+    run = lambda: subprocess.run([sys.executable, "-c", code, str(clone / "gsbench" / "environment.py")],  # noqa: E731
+                                 capture_output=True, text=True, check=True).stdout.strip()
+    assert run() == "False"
+    (clone / "notes.txt").write_text("untracked")
+    assert run() == "False"
+    (clone / "gsbench" / "__init__.py").write_text("# edited\n")
+    assert run() == "True"
 
 
 @pytest.mark.parametrize("factor", [2, 8])
