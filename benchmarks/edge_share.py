@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/edge_share.py [--work DIR] [--presets tabletop-medium room-medium]
                                              [--sizes 256x192 1008x756] [--distortions 0 1 2] [--views 4]
-                                             [--prior-module path/to/depth.py]
+                                             [--prior-module path/to/depth.py] [--set KEY=VALUE ...]
 
 For each preset and size it makes a synthetic scene with `gsbench make-scene` (kept in --work and
 reused), then, for each `priors.depth.distortion`, builds the depth prior and E_d the way training
@@ -70,13 +70,13 @@ def scene_folder(work: Path, preset: str, size: tuple[int, int], views: int, see
 def edge_maps(cfg: dict, depth: dict) -> dict:
     """E_d of each view's (values, valid), with the config's `gaussiands.edges`."""
     e = cfg["gaussiands"]["edges"]
-    return {v: depth_edges(vals, ok, e["canny_low"], e["canny_high"], int(e["dilate"]))
+    return {v: depth_edges(vals, ok, e["canny_low"], e["canny_high"], int(e["dilate"]), e.get("size"))
             for v, (vals, ok) in depth.items()}
 
 
-def edge_share(scene, prior: ModuleType, distortion: float) -> tuple[float, int, int]:
+def edge_share(scene, prior: ModuleType, distortion: float, sets: list[str]) -> tuple[float, int, int]:
     """(mean E_d share over the training views, views under EDGE_FLOOR, views) at one distortion."""
-    cfg = load_config("gaussiands", None, [f"priors.depth.distortion={distortion:g}"])
+    cfg = load_config("gaussiands", None, [f"priors.depth.distortion={distortion:g}", *sets])
     req = build_priors_request(cfg, scene)
     depth = prior.compute_depth(scene, req["priors"]["depth"], req["view_ids"], tuple(req["size"]),
                                 seed=req["seed"], progress=False)
@@ -84,9 +84,9 @@ def edge_share(scene, prior: ModuleType, distortion: float) -> tuple[float, int,
     return share, n_empty, len(depth)
 
 
-def gt_edge_share(scene) -> tuple[float, int, int]:
+def gt_edge_share(scene, sets: list[str]) -> tuple[float, int, int]:
     """`edge_share` on the exact GT disparity at the training size (the upper bound)."""
-    cfg = load_config("gaussiands")
+    cfg = load_config("gaussiands", None, sets)
     req = build_priors_request(cfg, scene)
     depth = {}
     for v in req["view_ids"]:
@@ -106,6 +106,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--views", type=int, default=4)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--prior-module", default=None, help="another depth.py to take compute_depth from")
+    ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                    help="config overrides, e.g. gaussiands.edges.size=518")
     args = ap.parse_args(argv)
     prior = load_prior_module(args.prior_module)
     tmp = None if args.work else tempfile.TemporaryDirectory(prefix="edge_share_")
@@ -114,12 +116,12 @@ def main(argv: list[str] | None = None) -> int:
     sizes = [parse_size(t) for t in args.sizes]
     folders = {(p, sz): scene_folder(work, p, sz, args.views, args.seed) for p in args.presets for sz in sizes}
     print(f"E_d share (% of pixels, mean over views; [views under {100 * EDGE_FLOOR:g} %]), "
-          f"prior from {args.prior_module or 'gsbench.priors.depth'}")
+          f"prior from {args.prior_module or 'gsbench.priors.depth'}; overrides: {' '.join(args.set) or 'none'}")
     print("| scene | size | " + " | ".join(f"distortion {d:g}" for d in args.distortions) + " | GT disparity |")
     print("|---|---|" + "---:|" * (len(args.distortions) + 1))
     for (preset, size), folder in folders.items():
         scene = load_scene(folder)
-        results = [edge_share(scene, prior, d) for d in args.distortions] + [gt_edge_share(scene)]
+        results = [edge_share(scene, prior, d, args.set) for d in args.distortions] + [gt_edge_share(scene, args.set)]
         cells = [f"{100 * share:.2f} [{n_empty}/{n}]" for share, n_empty, n in results]
         print(f"| {preset} | {size[0]}x{size[1]} | " + " | ".join(cells) + " |", flush=True)
     if tmp is not None:

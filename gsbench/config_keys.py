@@ -187,6 +187,7 @@ RULES: dict[str, Rule] = {
     "gaussiands.edges.canny_low": at_least(0),
     "gaussiands.edges.canny_high": at_least(0),
     "gaussiands.edges.dilate": at_least(0),
+    "gaussiands.edges.size": at_least(8, kind="int", integer=True),   # null = Canny at the training size
     "gaussiands.min_valid_pixels": at_least(1),
     "twostage.semantic_iterations": at_least(1, kind="int", integer=True),  # null = train.iterations
     # Gaussian Grouping-style baseline

@@ -397,21 +397,40 @@ def edge_coverage(edges: Mapping[Any, np.ndarray], floor: float = EDGE_FLOOR) ->
 
 
 def depth_edges(values: np.ndarray, valid: np.ndarray, low: float = 50, high: float = 150,
-                dilate: int = 1) -> np.ndarray:
+                dilate: int = 1, size: int | None = None) -> np.ndarray:
     """E_d: Canny edges of the depth prior normalised to 8 bits, restricted to valid pixels (bool H x W).
 
     Edges that only mark the border of the invalid region are removed (valid mask eroded by one pixel
-    before masking). `dilate` = number of 3x3 dilation passes (0 = none).
+    before masking). `dilate` = number of 3x3 dilation passes (0 = none). `size` (gaussiands.edges.size):
+    the short side in pixels at which Canny runs when the prior is larger (the prior is area-averaged
+    over its valid pixels down to it, and the edges are scaled back by nearest neighbour), so E_d's
+    share of the pixels does not shrink as 1 / resolution; None = at the prior's own size.
     """
-    img = to_uint8_minmax(values, valid)
+    values = np.asarray(values)
+    finite = np.asarray(valid, dtype=bool) & np.isfinite(values.astype(np.float64))   # NaN/inf = invalid
+    H, W = values.shape[:2]
+    if size is None or min(H, W) <= int(size):
+        return _edges_here(values, finite, low, high, dilate)
+    scale = int(size) / min(H, W)
+    w, h = max(1, round(W * scale)), max(1, round(H * scale))
+    num = cv2.resize(np.where(finite, values, 0.0).astype(np.float64), (w, h), interpolation=cv2.INTER_AREA)
+    den = cv2.resize(finite.astype(np.float64), (w, h), interpolation=cv2.INTER_AREA)
+    small = np.divide(num, den, out=np.zeros_like(num), where=den > 0)
+    e = _edges_here(small, den > 0.5, low, high, dilate)
+    return (cv2.resize(e.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST) > 0) & finite
+
+
+def _edges_here(values: np.ndarray, finite: np.ndarray, low: float, high: float, dilate: int) -> np.ndarray:
+    """`depth_edges` at the prior's own size; `finite` = valid and finite."""
+    img = to_uint8_minmax(values, finite)
     if img is None:
-        return np.zeros(np.asarray(values).shape, dtype=bool)
+        return np.zeros(finite.shape, dtype=bool)
     e = cv2.Canny(img, float(low), float(high)) > 0
-    m = np.asarray(valid, dtype=bool) & np.isfinite(np.asarray(values, dtype=np.float64))  # NaN/inf = invalid
+    m = finite
     if not m.all():
         m = cv2.erode(m.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     e &= m
     if dilate > 0:
         e = cv2.dilate(e.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=int(dilate)) > 0
-        e &= np.asarray(valid, dtype=bool) & np.isfinite(np.asarray(values, dtype=np.float64))
+        e &= finite
     return e

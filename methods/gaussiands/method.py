@@ -71,7 +71,7 @@ class GaussianDS(Method):
         if g["losses"]["ds"] and depth is not None:
             e = g["edges"]
             edges_np = {v: depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"],
-                                       int(e["dilate"])) for v in train_ids}
+                                       int(e["dilate"]), e.get("size")) for v in train_ids}
             share, n_empty = edge_coverage(edges_np)
             self.info["edge_fraction"], self.info["edge_views_empty"] = share, n_empty
             if n_empty:
