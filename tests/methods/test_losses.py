@@ -210,7 +210,7 @@ def test_depth_edges_step_and_affine_invariance():
     assert not depth_edges(np.full((10, 10), 3.0), np.ones((10, 10), bool)).any()
 
 
-def _ramp(width: int, height: int, at: float, spread: float) -> np.ndarray:
+def _soft_step(width: int, height: int, at: float, spread: float) -> np.ndarray:
     """A disparity that climbs from 1 to 2 over `spread` pixels around column `at` (a step upsampled
     from a coarser map is such a ramp)."""
     x = np.arange(width, dtype=np.float64)
@@ -221,12 +221,13 @@ def test_depth_edges_at_a_working_size_find_a_soft_step_the_full_size_misses():
     """A step spread over 16 pixels climbs 255 / 16 levels per pixel: Sobel gives 8 x 16 = 128 < 150, so
     Canny at full size finds nothing. At a quarter of the size the ramp is 4 pixels (Sobel 512) and the
     edge is found, back at full size within a few working pixels of the step, and nowhere else."""
-    v, valid = _ramp(1000, 400, 600.0, 16.0), np.ones((400, 1000), bool)
+    v, valid = _soft_step(1000, 400, 600.0, 16.0), np.ones((400, 1000), bool)
     assert not depth_edges(v, valid, 50, 150, dilate=1).any()
     e = depth_edges(v, valid, 50, 150, dilate=1, size=100)           # Canny on 250 x 100
     cols = np.unique(np.nonzero(e)[1])
     assert e.shape == v.shape and len(cols) > 0
-    assert cols.min() >= 600 - 4 * 4 and cols.max() <= 600 + 4 * 4   # +- (2 for the ramp + 2 for the dilation) working px
+    # within +- (2 for the ramp + 2 for the dilation) working pixels of the step
+    assert cols.min() >= 600 - 4 * 4 and cols.max() <= 600 + 4 * 4
     # the size is a short side: a prior no larger than it is left as it is
     np.testing.assert_array_equal(depth_edges(v, valid, 50, 150, 1, size=400), depth_edges(v, valid, 50, 150, 1))
 
@@ -234,15 +235,15 @@ def test_depth_edges_at_a_working_size_find_a_soft_step_the_full_size_misses():
 def test_depth_edges_share_follows_the_working_size_not_the_view_size():
     """The same sharp step at 1000 x 400 with size 100 and at 250 x 100 without: the same share of pixels
     (Canny's one-pixel line, dilated, is a share of the working width either way)."""
-    big = depth_edges(_ramp(1000, 400, 600.0, 1e-3), np.ones((400, 1000), bool), 50, 150, 1, size=100)
-    small = depth_edges(_ramp(250, 100, 150.0, 1e-3), np.ones((100, 250), bool), 50, 150, 1)
+    big = depth_edges(_soft_step(1000, 400, 600.0, 1e-3), np.ones((400, 1000), bool), 50, 150, 1, size=100)
+    small = depth_edges(_soft_step(250, 100, 150.0, 1e-3), np.ones((100, 250), bool), 50, 150, 1)
     assert small.mean() > 0 and big.mean() == pytest.approx(small.mean(), rel=0.05)
-    assert depth_edges(_ramp(1000, 400, 600.0, 1e-3), np.ones((400, 1000), bool), 50, 150, 1).mean() \
+    assert depth_edges(_soft_step(1000, 400, 600.0, 1e-3), np.ones((400, 1000), bool), 50, 150, 1).mean() \
         < big.mean() / 3                                             # at full size it is a quarter of that
 
 
 def test_depth_edges_at_a_working_size_keep_out_of_invalid_pixels():
-    v = _ramp(1000, 400, 600.0, 1e-3)
+    v = _soft_step(1000, 400, 600.0, 1e-3)
     valid = np.ones(v.shape, bool)
     valid[:, 800:] = False                 # the invalid border is no edge, and invalid pixels get none
     v[~valid] = np.nan
