@@ -118,7 +118,8 @@ def _run(args, work: Path) -> int:
     from gsbench.datasets.synthetic import make_scene
     from gsbench.methods.base import load_views
     from gsbench.methods.common import fit_priors
-    from gsbench.runs import load_run, train_run
+    from gsbench.runs import train_run
+    from gsbench.trained_run import load_run
     W, H = args.size
     width = args.train_width or W
     ph = Phases()

@@ -17,7 +17,7 @@ method, all in the same process:
   over the steps after the first log interval (warm-up: numba compile, caches, CUDA kernels).
   Priors, autoencoder and evaluation are outside the timed steps.
 A second table gives each harness row's step in ms per phase (projection, raster forward, raster
-backward, losses, optimiser, densify, other; see `phase_ms`), from the gsbench.phases timers over
+backward, losses, optimiser, densify, other; see `phase_ms`), from the gsbench.step_timers timers over
 the whole run. Each harness row is also printed as a ratio to the reference row of the same device and size
 (ratio = harness it/s / reference it/s) and gaussiands as a ratio to vanilla. Ratios are taken within
 one process on one machine; absolute it/s depend on the machine and its load.
@@ -116,7 +116,7 @@ PHASES = ("projection", "raster fwd", "raster bwd", "losses", "optimiser", "dens
 
 
 def phase_ms(tot: dict, steps: int, step_s: float) -> dict:
-    """ms per step of each phase from gsbench.phases totals over `steps` steps of `step_s` seconds in all.
+    """ms per step of each phase from gsbench.step_timers totals over `steps` steps of `step_s` seconds in all.
 
     projection = forward + hand-written backward; losses = the loss terms plus the autograd backward
     that is not the renderer's own (SSIM, L1, the loss terms' graph, SH colours); other = the rest of
@@ -133,21 +133,21 @@ def phase_ms(tot: dict, steps: int, step_s: float) -> dict:
 def harness_its(method: str, n: int, w: int, h: int, device: torch.device, iters: int,
                 root: Path) -> tuple[float, dict]:
     """(it/s after the first log interval, ms per step of each phase over the whole run)."""
-    from gsbench import phases
+    from gsbench import step_timers
     from gsbench.runs import train_run
     from gsbench.store import read_jsonl
     log_every = max(5, iters // 4)
     cfg = _config(method, n, w, device, iters + log_every, log_every, root)
-    phases.reset()
-    phases.enable()
+    step_timers.reset()
+    step_timers.enable()
     try:
         run = train_run(cfg, _scene(root, w, h), root / f"{method}_{device.type}_{n}_{w}x{h}", progress=False)
     finally:
-        phases.enable(False)
+        step_timers.enable(False)
     log = [r for r in read_jsonl(run / rundir.TRAIN_LOG) if "loss" in r]
     first, last = log[0], log[-1]
     its = (last["step"] - first["step"]) / max(1e-9, last["wall_s"] - first["wall_s"])
-    return its, phase_ms(phases.totals(), last["step"], last["wall_s"])
+    return its, phase_ms(step_timers.totals(), last["step"], last["wall_s"])
 
 
 def main(argv: list[str] | None = None) -> int:

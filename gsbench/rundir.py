@@ -10,7 +10,7 @@ One home for the layout, so a writer and its readers cannot disagree on a name:
     RUN/train_summary.json   training time, peaks, the method's info
     RUN/model.pt             the trained method (Method.save / Method.load)
     RUN/results.json         the evaluation (gsbench.results schema)
-    RUN/previews/            small arrays for the report's pictures (gsbench.previews)
+    RUN/previews/            small arrays for the report's pictures (gsbench.preview_files)
     RUN/cell.json            a grid cell's spec, RUN/cell_status.json its heartbeat (gsbench.grids)
     RUN/writer.lock          held by the one command writing the folder (gsbench.runlock)
     <runs>/.gsbench_cache/   the priors cache a folder of runs shares (priors.cache_dir: null)

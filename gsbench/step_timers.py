@@ -1,4 +1,4 @@
-"""Wall-time totals of the phases of a training step, for benchmarks/train_speed.py.
+"""Wall-time totals of the parts of a training step (named timers), for benchmarks/train_speed.py.
 
 Off by default (a disabled `timed` block costs one function call). When enabled, the `cpu` render
 backend adds `projection`, `raster_forward`, `raster_backward` and `projection_backward`, and the
@@ -27,13 +27,13 @@ def reset() -> None:
 
 
 def totals() -> dict[str, float]:
-    """Seconds per phase since the last `reset`."""
+    """Seconds per timer since the last `reset`."""
     return dict(_totals)
 
 
 @contextmanager
 def timed(name: str) -> Iterator[None]:
-    """Add the wall time of the block to phase `name` when enabled."""
+    """Add the wall time of the block to timer `name` when enabled."""
     if not _enabled:
         yield
         return

@@ -1,6 +1,6 @@
 """The one table of studies: what each grid study varies, its label, the reference row the others are
 compared with, and whether it feeds the main tables. Grids check their axes against it
-(gsbench/grids/spec.py) and the report reads labels, references and the main studies from it.
+(gsbench/grids/grid_file.py) and the report reads labels, references and the main studies from it.
 
 A study is the name a grid records on every run (`study:` in gsbench/grids/*.yaml); `axes` are the
 config keys (or `method`) its grids may vary; `reference` selects the row every other row of the

@@ -1,9 +1,12 @@
 """gsbench.methods: the Method protocol (base.py) and the methods behind it.
 
-    get_method("gaussiands" | "vanilla" | "twostage") -> Method class
+    get_method(name) -> Method class        # name: any of METHODS
 
-Which methods exist is decided in registry.py (one registration per method); importing this package
-does not import torch: `Method` and the method classes load on first use.
+Which methods exist is not listed here: each method registers through its spec module beside it
+(`methods/*_spec.py`, `methods/gaussiands/spec.py`), and the ground-floor table
+gsbench/method_table.py discovers them (the built-in specs, then the `gsbench.methods` entry points
+of installed plugins); METHODS reads the registered names. Importing this package does not import
+torch: `Method` and the method classes load on first use.
 """
 from __future__ import annotations
 

@@ -35,8 +35,8 @@ from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.methods.autoencoder import FeatureAutoencoder
+from gsbench.methods.backend_choice import prepare_backend, resolve_backend_for
 from gsbench.methods.common import resolve_render_backend
-from gsbench.methods.device import prepare_backend, resolve_backend_for
 from gsbench.methods.feature_blocks import FeatureBlocks
 from gsbench.methods.registry import get_method
 from gsbench.methods.residency import DEVICE, data_on, place

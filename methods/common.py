@@ -11,7 +11,7 @@ from gsbench.config import setting
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
-from gsbench.methods.device import resolve_backend_for
+from gsbench.methods.backend_choice import resolve_backend_for
 from gsbench.methods.registry import build_priors_request, uses
 from gsbench.methods.trainer import LossResult, Trainer, TrainViews
 from gsbench.priors import prepare_priors

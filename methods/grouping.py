@@ -28,7 +28,7 @@ import logging
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 import torch
@@ -216,32 +216,10 @@ class GaussianGrouping(Method):
         train_ids = sorted(views.cameras)
         ckpt = resume
         dim = int(g["identity_dim"]) if semantic else 0
-        C = 0
         targets: Mapping[int, torch.Tensor] = {}
+        has_any: dict[int, bool] = {}
         if semantic:
-            pri = fit_priors(scene, config, run_dir, progress=progress)
-            self.providers = dict(pri.providers)
-            self.info["priors_stats"] = dict(pri.stats)
-            self.info["priors_skipped"] = dict(pri.skipped)
-            if pri.masks is None or pri.mask_features is None:
-                raise ValueError(f"grouping: the identity loss is on but the priors gave no masks/features "
-                                 f"({pri.skipped})")
-            self.tracks, C = track_classes({v: pri.masks[v] for v in train_ids}, g["num_classes"])
-            feat_dim = len(next(iter(pri.mask_features.values())))
-            self.table = track_table(pri.mask_features, self.tracks, C, feat_dim).to(dev)
-            for v in train_ids:
-                m = np.asarray(pri.masks[v])
-                if m.shape != (H, W):
-                    raise ValueError(f"mask of view {v} has shape {m.shape}, expected {(H, W)} (training resolution)")
-                targets[v] = torch.as_tensor(class_map(m, self.tracks)).reshape(-1)
-            targets = place(targets, dev, data_on(config))
-            with torch.random.fork_rng(devices=[]):
-                torch.manual_seed(seed)
-                self.classifier = torch.nn.Linear(dim, C).to(dev)
-            self.info["tracks"] = len(self.tracks)
-            self.info["num_classes"] = C
-        # views whose masks cover nothing (e.g. unlabelled views of gt masks) teach no identity
-        has_any = {v: bool((np.asarray(pri.masks[v]) >= 0).any()) for v in train_ids} if semantic else {}
+            targets, has_any = self._identity_targets(scene, config, run_dir, progress, train_ids, (W, H), dim, dev)
 
         field0, how = scene_init(scene, config, 0)
         self.info["init"] = how
@@ -259,9 +237,65 @@ class GaussianGrouping(Method):
                 opt.load_state_dict(extra["classifier_optimizer"])
                 gen.set_state(extra["reg3d_generator"])
 
+        holder: dict = {"step": int(resumed["step"]) if resumed else 0}
+        loss_fn = self._loss_fn(config, semantic, dim, targets, has_any, holder, gen)
+
+        def extra_state() -> dict:
+            if self.classifier is None:
+                return {}
+            return {"classifier": self.classifier.state_dict(), "classifier_optimizer": opt.state_dict(),
+                    "reg3d_generator": gen.get_state()}
+
+        tr = Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase="main",
+                     backend=self._backend, seed=seed, extra_state=extra_state, device=dev, extra_optimizer=opt)
+        holder["trainer"] = tr
+        self.field = yield tr
+        if self.classifier is not None:
+            self.classifier.eval()
+        self.info["n_gaussians"] = self.field.num
+        self.info["device"] = str(dev)
+        self.info["budget"] = budget(config)   # one joint phase: identity, classifier and RGB every step
+
+    def _identity_targets(self, scene, config: dict, run_dir: Path, progress: bool, train_ids: list[int],
+                          size: tuple[int, int], dim: int, dev) -> tuple[Mapping[int, torch.Tensor], dict[int, bool]]:
+        """The priors' propagated masks as per-pixel class targets (tracks -> classes, the tracks' feature
+        table, a seeded classifier), and per view whether it has any target at all."""
+        W, H = size
+        g = config["grouping"]
+        pri = fit_priors(scene, config, run_dir, progress=progress)
+        self.providers = dict(pri.providers)
+        self.info["priors_stats"] = dict(pri.stats)
+        self.info["priors_skipped"] = dict(pri.skipped)
+        if pri.masks is None or pri.mask_features is None:
+            raise ValueError(f"grouping: the identity loss is on but the priors gave no masks/features "
+                             f"({pri.skipped})")
+        self.tracks, C = track_classes({v: pri.masks[v] for v in train_ids}, g["num_classes"])
+        feat_dim = len(next(iter(pri.mask_features.values())))
+        self.table = track_table(pri.mask_features, self.tracks, C, feat_dim).to(dev)
+        targets: Mapping[int, torch.Tensor] = {}
+        for v in train_ids:
+            m = np.asarray(pri.masks[v])
+            if m.shape != (H, W):
+                raise ValueError(f"mask of view {v} has shape {m.shape}, expected {(H, W)} (training resolution)")
+            targets[v] = torch.as_tensor(class_map(m, self.tracks)).reshape(-1)
+        targets = place(targets, dev, data_on(config))
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(int(config["seed"]))
+            self.classifier = torch.nn.Linear(dim, C).to(dev)
+        self.info["tracks"] = len(self.tracks)
+        self.info["num_classes"] = C
+        # views whose masks cover nothing (e.g. unlabelled views of gt masks) teach no identity
+        has_any = {v: bool((np.asarray(pri.masks[v]) >= 0).any()) for v in train_ids}
+        return targets, has_any
+
+    def _loss_fn(self, config: dict, semantic: bool, dim: int, targets: Mapping[int, torch.Tensor],
+                 has_any: dict[int, bool], holder: dict, gen: torch.Generator
+                 ) -> Callable[[int, Any, torch.Tensor], LossResult]:
+        """The per-step loss (module docstring): L_rec, the identity loss on views with targets, and every
+        `reg3d.interval` steps (counted in `holder["step"]`) the 3D neighbour KL over sampled Gaussians."""
+        g = config["grouping"]
         lam_dssim = float(config["train"]["lambda_dssim"])
         on, lam, r3 = g["losses"], g["lambdas"], g["reg3d"]
-        holder: dict = {"step": int(resumed["step"]) if resumed else 0}
 
         def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
             holder["step"] += 1
@@ -287,18 +321,4 @@ class GaussianGrouping(Method):
             terms["total"] = total.detach()
             return LossResult(total, terms, skipped, weighted)
 
-        def extra_state() -> dict:
-            if self.classifier is None:
-                return {}
-            return {"classifier": self.classifier.state_dict(), "classifier_optimizer": opt.state_dict(),
-                    "reg3d_generator": gen.get_state()}
-
-        tr = Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase="main",
-                     backend=self._backend, seed=seed, extra_state=extra_state, device=dev, extra_optimizer=opt)
-        holder["trainer"] = tr
-        self.field = yield tr
-        if self.classifier is not None:
-            self.classifier.eval()
-        self.info["n_gaussians"] = self.field.num
-        self.info["device"] = str(dev)
-        self.info["budget"] = budget(config)   # one joint phase: identity, classifier and RGB every step
+        return loss_fn

@@ -14,7 +14,7 @@ harness to `checkpoint.pt`) holds parameters, Adam state, densification statisti
 and elapsed time. A non-finite loss or parameter raises NonFiniteError; the last good checkpoint is kept.
 
 Device: the field, Adam state, densification statistics and background live on the device of the
-views' images (methods.device.resolve_device). A step does no host work: loss terms, skip counts
+views' images (gsbench.device.resolve_device). A step does no host work: loss terms, skip counts
 and a first-non-finite-step flag stay on the device and are read only at log, eval, checkpoint and
 densification steps (the loop's only synchronisation points), so a non-finite loss is reported
 with its exact step at the next such point and no checkpoint is ever written after it. (This is
@@ -39,9 +39,9 @@ from gsbench.errors import InputError, NonFiniteError
 from gsbench.gaussians import SH_C0, GaussianField
 from gsbench.methods.adam import Adam
 from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
-from gsbench.phases import timed
 from gsbench.render import RenderOutput, render
 from gsbench.render.threads import torch_ops_serial
+from gsbench.step_timers import timed
 from gsbench.store import load_torch
 
 LR_KEYS = {"colors": "color", "opacity_logits": "opacity", "log_scales": "scaling", "quats": "rotation",

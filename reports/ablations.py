@@ -6,6 +6,7 @@ apart, e.g. L_depth on a scene without a depth prior) are merged into one row an
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Callable
 
 from gsbench.config import config_key
@@ -13,7 +14,7 @@ from gsbench.methods.registry import method_sort_key
 from gsbench.reports.data import Results, is_null, mean_of_cells, same
 from gsbench.studies import MAIN_STUDIES
 
-from gsbench.reports.spec import (AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
+from gsbench.reports.display import (AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
                                   AX_ORDERING, LOSS_SUBSET_ORDER, REFERENCE_TEXT, STUDIES,
                                   STUDY_REFERENCE, method_label, metric_spec)
 from gsbench.reports.stats import compare
@@ -103,23 +104,10 @@ def _group_combos(res: Results, ids: list[str], keys: list[str], combos: list[tu
 
 
 # ---------------------------------------------------------------------------- the tables
-def ablation_table(res: Results, study: str, tid: str, title: str, caption: str, row_axes: list[str],
-                   label_headers: list[str], metrics: list[str], checks: bool = False,
-                   row_sort: Callable[[tuple], Any] | None = None,
-                   row_labels: Callable[[tuple], list[str]] | None = None,
-                   label_headers_latex: list[str] | None = None) -> list[Table]:
-    """Rows = distinct values of the study's axes (plus method and any unexpected varying axis),
-    column groups = scenes (with a mean over the scenes of each protocol), columns = metrics.
-    Logical metrics ('miou', 'mbiou') resolve per protocol; best per column bold. Followed by the
-    difference table when the study has a reference row."""
-    ids = res.run_ids(study=study)
-    if not ids:
-        return []
-    methods = ordered_methods(res.distinct("method", ids))
-    # axis.method (a grid cell that sets the method) repeats the method column when there is one
-    extra = [c for c in res.axis_columns if c not in row_axes and len(res.distinct(c, ids)) > 1
-             and not (c == "axis.method" and len(methods) > 1)]
-    keys = ["method"] * (len(methods) > 1) + row_axes + extra
+def _sorted_combos(res: Results, ids: list[str], keys: list[str], n_method: int, n_axes: int,
+                   row_sort: Callable[[tuple], Any] | None) -> list[tuple]:
+    """The distinct combos of `keys` over the runs, in row order: method, then the study's axes (by
+    `row_sort` when given, else by axis rank), then any unexpected varying axis."""
     combos: list[tuple] = []
     for rid in ids:
         combo = tuple(_get(res, rid, k) for k in keys)
@@ -132,14 +120,28 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
             out.append(method_sort_key(v) if k == "method" else _axis_rank(k, v))
         return tuple(out)
 
-    n_method = 1 if len(methods) > 1 else 0
     if row_sort is None:
         combos.sort(key=default_sort)
     else:
-        combos.sort(key=lambda c: (default_sort(c)[:n_method], row_sort(c[n_method:n_method + len(row_axes)]),
-                                   default_sort(c)[n_method + len(row_axes):]))
-    groups = _group_combos(res, ids, keys, combos)
+        combos.sort(key=lambda c: (default_sort(c)[:n_method], row_sort(c[n_method:n_method + n_axes]),
+                                   default_sort(c)[n_method + n_axes:]))
+    return combos
 
+
+@dataclass
+class _ColumnPlan:
+    """The table's columns: one per evaluated (scene, protocol, metric), then the per-protocol means."""
+
+    pairs: list[tuple[str, Any]]                      # (scene, protocol) of the study's runs
+    group_cols: list[tuple[str, Any, str]]            # (scene, protocol, logical metric)
+    mean_groups: list[tuple[Any, str, list[str]]]     # (protocol, logical metric, scenes averaged)
+    columns: list[Column]
+    not_evaluated: list[str]
+
+
+def _column_plan(res: Results, ids: list[str], metrics: list[str]) -> _ColumnPlan | None:
+    """The columns of the metrics evaluated on each scene (None when none is); the others are listed
+    for the table's note."""
     pairs = scene_protocols(res, ids)
     group_cols: list[tuple[str, Any, str]] = []  # (scene, protocol, logical metric)
     not_evaluated = []
@@ -152,7 +154,7 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
                 continue
             group_cols.append((sc, pr, m))
     if not group_cols:
-        return []
+        return None
     multi = len(pairs) > 1
     columns = []
     for sc, _pr, m in group_cols:
@@ -170,13 +172,13 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
                 mean_groups.append((pr, m, have))
                 sp = _spec_for(m)
                 columns.append(Column(m, sp.label, sp.latex, sp.better, group=f"Mean ({PROTOCOL_SHORT.get(pr, pr)})"))
+    return _ColumnPlan(pairs, group_cols, mean_groups, columns, not_evaluated)
 
-    def row_runs(group: list[tuple], sc: str, pr: Any) -> list[str]:
-        rids: list[str] = []
-        for combo in group:
-            rids += res.run_ids(study=study, scene=sc, protocol=pr, **_eq_filter(dict(zip(keys, combo)), methods))
-        return _one_per_seed(res, rids) if len(group) > 1 else rids
 
+def _label_maker(row_axes: list[str], extra: list[str], n_method: int, checks: bool,
+                 row_labels: Callable[[tuple], list[str]] | None
+                 ) -> Callable[[tuple], tuple[list[str], list[bool] | None]]:
+    """combo -> (row labels: method, the study's axes, extra axes; the check marks of a checks table)."""
     def label_of(combo: tuple) -> tuple[list[str], list[bool] | None]:
         axis_vals = combo[n_method:n_method + len(row_axes)]
         labels = row_labels(axis_vals) if row_labels else [_axis_label(k, v) for k, v in zip(row_axes, axis_vals)]
@@ -186,11 +188,15 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
         extra_l = [_axis_label(k, v) for k, v in zip(extra, combo[n_method + len(row_axes):])]
         checks_l = [bool(v) if not is_null(v) else False for v in axis_vals] if checks else None
         return prefix + labels + extra_l, checks_l
+    return label_of
 
-    any_dropped = any(run_dropped(res, r) for r in ids)
-    merged_any = any(len(g) > 1 for g in groups)
-    plain_checks = checks and not (n_method or extra or merged_any or any_dropped)
-    rows, mixed, row_groups = [], [], []
+
+def _ablation_rows(res: Results, ids: list[str], keys: list[str], groups: list[list[tuple]], plan: _ColumnPlan,
+                   label_of: Callable, row_runs: Callable, mixed: list, any_dropped: bool,
+                   plain_checks: bool) -> list[Row]:
+    """One row per group of combos: merged groups join their differing labels and say why they are one
+    configuration; with any dropped setting, a last label lists what the resolver dropped."""
+    rows = []
     for group in groups:
         labels, checks_l = label_of(group[0])
         if len(group) > 1:
@@ -198,12 +204,12 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
             labels = ["/".join(dict.fromkeys(a[i] or "–" for a in alts)) if len({a[i] for a in alts}) > 1 else labels[i]
                       for i in range(len(labels))]
         cells, by = [], {}
-        for sc, pr, m in group_cols:
+        for sc, pr, m in plan.group_cols:
             rids = row_runs(group, sc, pr)
             c = _cell(res, rids, res.resolve(m, pr), mixed, f"{sc}/{_combo_text(keys, group[0])}", _spec_for(m))
             by[(sc, m)] = c
             cells.append(c)
-        for _pr, m, scs in mean_groups:
+        for _pr, m, scs in plan.mean_groups:
             cells.append(mean_of_cells([by[(sc, m)] for sc in scs], scs, _spec_for(m).decimals))
         group_ids = [r for r in ids if any(_same_combo(tuple(_get(res, r, k) for k in keys), c) for c in group)]
         reasons = list(dict.fromkeys(why for r in group_ids for why in run_dropped(res, r).values()))
@@ -214,24 +220,66 @@ def ablation_table(res: Results, study: str, tid: str, title: str, caption: str,
                 "; ".join(dict.fromkeys(f"{k}: {v}" for r in group_ids for k, v in run_dropped(res, r).items()))
             )
         rows.append(Row(labels, cells, label_checks=checks_l if plain_checks else None))
-        row_groups.append(group)
+    return rows
+
+
+def ablation_table(res: Results, study: str, tid: str, title: str, caption: str, row_axes: list[str],
+                   label_headers: list[str], metrics: list[str], checks: bool = False,
+                   row_sort: Callable[[tuple], Any] | None = None,
+                   row_labels: Callable[[tuple], list[str]] | None = None,
+                   label_headers_latex: list[str] | None = None) -> list[Table]:
+    """Rows = distinct values of the study's axes (plus method and any unexpected varying axis),
+    column groups = scenes (with a mean over the scenes of each protocol), columns = metrics.
+    Logical metrics ('miou', 'mbiou') resolve per protocol; best per column bold. Followed by the
+    difference table when the study has a reference row."""
+    ids = res.run_ids(study=study)
+    if not ids:
+        return []
+    methods = ordered_methods(res.distinct("method", ids))
+    # axis.method (a grid cell that sets the method) repeats the method column when there is one
+    extra = [c for c in res.axis_columns if c not in row_axes and len(res.distinct(c, ids)) > 1
+             and not (c == "axis.method" and len(methods) > 1)]
+    keys = ["method"] * (len(methods) > 1) + row_axes + extra
+    n_method = 1 if len(methods) > 1 else 0
+    combos = _sorted_combos(res, ids, keys, n_method, len(row_axes), row_sort)
+    groups = _group_combos(res, ids, keys, combos)
+
+    plan = _column_plan(res, ids, metrics)
+    if plan is None:
+        return []
+    pairs = plan.pairs
+    multi = len(pairs) > 1
+
+    def row_runs(group: list[tuple], sc: str, pr: Any) -> list[str]:
+        rids: list[str] = []
+        for combo in group:
+            rids += res.run_ids(study=study, scene=sc, protocol=pr, **_eq_filter(dict(zip(keys, combo)), methods))
+        return _one_per_seed(res, rids) if len(group) > 1 else rids
+
+    any_dropped = any(run_dropped(res, r) for r in ids)
+    merged_any = any(len(g) > 1 for g in groups)
+    plain_checks = checks and not (n_method or extra or merged_any or any_dropped)
+    mixed: list = []
+    rows = _ablation_rows(res, ids, keys, groups, plan, _label_maker(row_axes, extra, n_method, checks, row_labels),
+                          row_runs, mixed, any_dropped, plain_checks)
+    row_groups = list(groups)
     heads = (["Method"] if n_method else []) + label_headers + [k.replace("axis.", "") for k in extra]
     if any_dropped:
         heads.append("Dropped by the resolver")
     cap = caption
     if not multi and pairs:
         cap += f" Scene: {pairs[0][0]} ({PROTOCOL_SHORT.get(pairs[0][1], pairs[0][1])})."
-    t = Table(tid, title, cap, heads, columns, rows, label_is_check=plain_checks)
+    t = Table(tid, title, cap, heads, plan.columns, rows, label_is_check=plain_checks)
     if label_headers_latex and plain_checks:
         t.label_headers_latex = label_headers_latex
-    if not_evaluated:
-        t.notes.append("Not evaluated, column left out: " + ", ".join(not_evaluated) + ".")
+    if plan.not_evaluated:
+        t.notes.append("Not evaluated, column left out: " + ", ".join(plan.not_evaluated) + ".")
     if merged_any:
         t.notes.append("Rows labelled 'merged' are one resolved configuration: the resolver dropped the setting "
                        "that told their grid cells apart, so they were trained and evaluated alike.")
     t.bold_best_per_column()
     out = [_finish(t, mixed)]
-    diff = diff_table(res, study, t, keys, row_groups, group_cols, row_runs)
+    diff = diff_table(res, study, t, keys, row_groups, plan.group_cols, row_runs)
     if diff is not None:
         out.append(diff)
     return out

@@ -15,7 +15,7 @@ from gsbench import rundir
 from gsbench.methods.registry import METHODS
 from gsbench.methods.registry import budget as method_budget
 from gsbench.reports.data import Results, is_null
-from gsbench.reports.spec import method_label
+from gsbench.reports.display import method_label
 from gsbench.reports.studies import ordered_methods
 from gsbench.reports.table import Cell, Column, Row, Table
 from gsbench.store import read_json

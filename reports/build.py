@@ -28,10 +28,10 @@ from gsbench.reports import pictures as pictures_mod
 from gsbench.reports.ablations import (depth_formulation_table, latent_diff_table, loss_subsets_table,  # isort: skip
                                        method_diff_table, noise_table, ordering_table, other_study_tables)
 from gsbench.reports.budgets import budget_table
-from gsbench.reports.claims import claims_table
+from gsbench.reports.claims_table import claims_table
 from gsbench.reports.controls import controls_table
 from gsbench.reports.data import Results, is_null
-from gsbench.reports.spec import STUDIES
+from gsbench.reports.display import STUDIES
 from gsbench.reports.studies import reconstruction_table, removal_table, semantic_table
 from gsbench.reports.sweeps import lambda_table, latent_dim_tables
 from gsbench.reports.table import Table

@@ -18,15 +18,15 @@ from typing import Iterable
 
 from gsbench.collect import collect
 from gsbench.errors import InputError
-from gsbench.grids.spec import Grid
+from gsbench.grids.grid_file import Grid
 from gsbench.grids.store import Published, Stale
 from gsbench.methods.gaussiands.paper import PAPER_CLAIMS
 from gsbench.numerics import NUMERICS_VERSION
 from gsbench.reports import doseplots
-from gsbench.reports.claims import NOT_RUN, claims_table
+from gsbench.reports.claims_table import NOT_RUN, claims_table
 from gsbench.reports.controls import CONTROLS, control_status, controls_table
 from gsbench.reports.data import Results
-from gsbench.reports.spec import metric_spec
+from gsbench.reports.display import metric_spec
 from gsbench.reports.table import Cell, Column, Row, Table
 from gsbench.store import write_bytes_atomic, write_json_atomic, write_text_atomic
 

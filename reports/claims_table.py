@@ -34,7 +34,7 @@ from gsbench.methods.losses import EDGE_FLOOR
 from gsbench.reports.ablations import _covered, run_dropped
 from gsbench.reports.controls import blind_claims, starved
 from gsbench.reports.data import Results, same
-from gsbench.reports.spec import metric_spec
+from gsbench.reports.display import metric_spec
 from gsbench.reports.stats import Diff, compare, family_note, mde_r, pearson, pearson_interval
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
 from gsbench.reports.sweeps import lambda_points

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from gsbench.methods.gaussiands.paper import DS_INPUTS
 from gsbench.reports.data import Results, same
 
-from gsbench.reports.spec import (AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
+from gsbench.reports.display import (AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
                                   AX_VIEWS, metric_spec)
 from gsbench.reports.stats import ALPHA, Diff, compare, family_note, holm
 from gsbench.reports.studies import PROTOCOL_SHORT, _axis_label, _axis_rank, _get, scene_protocols

@@ -11,7 +11,7 @@ from typing import Any, Iterable
 import numpy as np
 import pandas as pd
 
-from gsbench.reports.spec import LOGICAL, MetricSpec, metric_spec
+from gsbench.reports.display import LOGICAL, MetricSpec, metric_spec
 from gsbench.reports.table import Cell
 
 VALUE_COLUMNS = ("metric", "value", "metric_impl", "reason", "source")

@@ -17,7 +17,7 @@ from gsbench.methods.gaussiands.paper import LATENT_DIM_MIOU
 from gsbench.reports.data import Results, same
 from gsbench.reports.plots import _save, plt
 
-from gsbench.reports.spec import (AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_VIEWS,  # isort: skip
+from gsbench.reports.display import (AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_VIEWS,  # isort: skip
                                   NOISE_LABELS, metric_spec)
 from gsbench.reports.stats import t_quantile
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, _slug, scene_protocols

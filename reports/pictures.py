@@ -1,4 +1,4 @@
-"""The report's pictures: per scene, for the labelled frames each run saved (gsbench.previews), a
+"""The report's pictures: per scene, for the labelled frames each run saved (gsbench.preview_files), a
 grid with one row per method (render, rendered depth, each query's predicted mask over the render)
 under a ground-truth row (image, each query's GT mask over it), every tile with its metrics; and
 for removal, the render before and after beside the GT without the object.
@@ -20,9 +20,9 @@ import numpy as np
 from PIL import Image
 
 from gsbench.errors import InputError
-from gsbench.previews import FRAME_ARRAYS, REMOVAL_ARRAYS, read_arrays, read_manifest
+from gsbench.preview_files import FRAME_ARRAYS, REMOVAL_ARRAYS, read_arrays, read_manifest
 from gsbench.reports.data import Results, is_null
-from gsbench.reports.spec import method_label
+from gsbench.reports.display import method_label
 from gsbench.store import write_bytes_atomic
 from gsbench.studies import MAIN_STUDIES
 

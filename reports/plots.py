@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 
 from gsbench.reports.data import Results, is_null, same  # noqa: E402
 
-from gsbench.reports.spec import (AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # noqa: E402  # isort: skip
+from gsbench.reports.display import (AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # noqa: E402  # isort: skip
                                   LOGICAL, NOISE_LABELS, NOISE_ORDER, method_label, metric_spec)
 from gsbench import rundir
 from gsbench.reports.stats import pearson  # noqa: E402
@@ -216,6 +216,48 @@ def _lambda_slice(res: Results, sids: list[str], axes_all: list[str], keep: list
     return [r for r in sids if all(same(_get(res, r, a), v) for a, v in fixed.items())]
 
 
+def _lambda_surfaces(res: Results, sids: list[str], axes_all: list[str], concrete: str) -> list[tuple]:
+    """(a, b, a values, b values, mean metric (%) grid) of each lambda pair swept together: >= 75 % of the
+    pair's cells have runs with the other lambdas at their grid default."""
+    surfaces = []
+    for a, b in itertools.combinations(axes_all, 2):
+        sl = _lambda_slice(res, sids, axes_all, [a, b])
+        av = sorted(float(v) for v in res.distinct(a, sl) if not is_null(v))
+        bv = sorted(float(v) for v in res.distinct(b, sl) if not is_null(v))
+        if len(av) < 2 or len(bv) < 2:
+            continue
+        grid = np.full((len(bv), len(av)), np.nan)
+        for i, y in enumerate(bv):
+            for j, x in enumerate(av):
+                vals = [res.value(r, concrete) for r in sl if same(_get(res, r, a), x) and same(_get(res, r, b), y)]
+                if vals:
+                    grid[i, j] = float(np.mean(vals)) * 100.0
+        if np.isfinite(grid).mean() >= 0.75:
+            surfaces.append((a, b, av, bv, grid))
+    return surfaces
+
+
+def _draw_surface(fig, ax, grid: np.ndarray, av: list[float], bv: list[float], xlabel: str, ylabel: str,
+                  title: str) -> None:
+    """One surface as a heatmap, each cell annotated with its value (or 'no run'), with a colour bar."""
+    im = ax.imshow(grid, origin="lower", cmap="viridis", aspect="auto")
+    ax.set_xticks(range(len(av)), [f"{v:g}" for v in av])
+    ax.set_yticks(range(len(bv)), [f"{v:g}" for v in bv])
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    finite = grid[np.isfinite(grid)]
+    mid = (finite.min() + finite.max()) / 2
+    for i in range(len(bv)):
+        for j in range(len(av)):
+            if np.isfinite(grid[i, j]):
+                ax.text(j, i, f"{grid[i, j]:.1f}", ha="center", va="center", fontsize=8,
+                        color="white" if grid[i, j] < mid else "black")
+            else:
+                ax.text(j, i, "no run", ha="center", va="center", fontsize=7, color="gray")
+    fig.colorbar(im, ax=ax, label="mIoU (%)")
+
+
 def plot_lambda_surfaces(res: Results, path_prefix: Path) -> list[Path]:
     """Per scene: mIoU over each pair of lambdas that was swept together (>= 75 % of the pair's
     cells filled, the other lambdas at their grid default) as an annotated heatmap; lambdas in no
@@ -239,21 +281,7 @@ def plot_lambda_surfaces(res: Results, path_prefix: Path) -> list[Path]:
             r, why = pearson(*lambda_points(res, sc, pr, a, "miou"))
             r_of[a] = f"r={r:+.2f}" if r is not None else f"r n/a ({why})"
         short = {a: "λ_" + a.rsplit(".", 1)[-1] for a in axes_all}
-        surfaces = []
-        for a, b in itertools.combinations(axes_all, 2):
-            sl = _lambda_slice(res, sids, axes_all, [a, b])
-            av = sorted(float(v) for v in res.distinct(a, sl) if not is_null(v))
-            bv = sorted(float(v) for v in res.distinct(b, sl) if not is_null(v))
-            if len(av) < 2 or len(bv) < 2:
-                continue
-            grid = np.full((len(bv), len(av)), np.nan)
-            for i, y in enumerate(bv):
-                for j, x in enumerate(av):
-                    vals = [res.value(r, concrete) for r in sl if same(_get(res, r, a), x) and same(_get(res, r, b), y)]
-                    if vals:
-                        grid[i, j] = float(np.mean(vals)) * 100.0
-            if np.isfinite(grid).mean() >= 0.75:
-                surfaces.append((a, b, av, bv, grid))
+        surfaces = _lambda_surfaces(res, sids, axes_all, concrete)
         in_pair = {x for a, b, *_ in surfaces for x in (a, b)}
         curves = [a for a in axes_all if a not in in_pair]
         n = len(surfaces) + len(curves)
@@ -261,23 +289,8 @@ def plot_lambda_surfaces(res: Results, path_prefix: Path) -> list[Path]:
         nrow = math.ceil(n / ncol)
         fig, axs = plt.subplots(nrow, ncol, figsize=(max(7.5, 5.2 * ncol), 4.3 * nrow + 0.6), squeeze=False)
         for k, (a, b, av, bv, grid) in enumerate(surfaces):
-            ax = axs[k // ncol][k % ncol]
-            im = ax.imshow(grid, origin="lower", cmap="viridis", aspect="auto")
-            ax.set_xticks(range(len(av)), [f"{v:g}" for v in av])
-            ax.set_yticks(range(len(bv)), [f"{v:g}" for v in bv])
-            ax.set_xlabel(f"{short[a]} ({r_of[a]})")
-            ax.set_ylabel(f"{short[b]} ({r_of[b]})")
-            ax.set_title(f"mIoU (%) over {short[a]} × {short[b]}", fontsize=10)
-            finite = grid[np.isfinite(grid)]
-            mid = (finite.min() + finite.max()) / 2
-            for i in range(len(bv)):
-                for j in range(len(av)):
-                    if np.isfinite(grid[i, j]):
-                        ax.text(j, i, f"{grid[i, j]:.1f}", ha="center", va="center", fontsize=8,
-                                color="white" if grid[i, j] < mid else "black")
-                    else:
-                        ax.text(j, i, "no run", ha="center", va="center", fontsize=7, color="gray")
-            fig.colorbar(im, ax=ax, label="mIoU (%)")
+            _draw_surface(fig, axs[k // ncol][k % ncol], grid, av, bv, f"{short[a]} ({r_of[a]})",
+                          f"{short[b]} ({r_of[b]})", f"mIoU (%) over {short[a]} × {short[b]}")
         for k, a in enumerate(curves, start=len(surfaces)):
             ax = axs[k // ncol][k % ncol]
             sl = _lambda_slice(res, sids, axes_all, [a])

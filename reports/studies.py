@@ -14,7 +14,7 @@ from typing import Any
 from gsbench.reports.data import Results, is_null, mean_of_cells, same
 from gsbench.studies import MAIN_STUDIES
 
-from gsbench.reports.spec import (AX_FORMULATION, AX_NOISE_TYPE, AX_ORDERING, FORMULATION_LABELS,  # isort: skip
+from gsbench.reports.display import (AX_FORMULATION, AX_NOISE_TYPE, AX_ORDERING, FORMULATION_LABELS,  # isort: skip
                                   FORMULATION_ORDER, NOISE_LABELS, NOISE_ORDER, ORDERING_LABELS, ORDERING_ORDER,
                                   PROTOCOL_LABELS, MetricSpec, method_label, metric_spec)
 from gsbench.method_table import method_sort_key

@@ -6,7 +6,7 @@ import math
 from typing import Any
 
 from gsbench.reports.data import Results, is_null, same
-from gsbench.reports.spec import AX_LAMBDAS, AX_LATENT, method_label
+from gsbench.reports.display import AX_LAMBDAS, AX_LATENT, method_label
 from gsbench.reports.stats import pearson, pearson_interval
 
 from gsbench.reports.studies import (PROTOCOL_SHORT, _axis_label, _cell, _finish, _get, _slug, _spec_for,  # isort: skip

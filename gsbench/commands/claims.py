@@ -9,7 +9,12 @@ import sys
 import time
 from pathlib import Path
 
+from gsbench import grids
 from gsbench.errors import InputError
+from gsbench.grids import claims_plan
+from gsbench.grids.executors import make_executor
+from gsbench.grids.runs_folder import owned_runs_folder
+from gsbench.grids.store import repo_store, reuse_published
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,14 +41,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench.grids.claims import CLAIM_GRIDS, CONTROL_GRIDS, plan_grids  # lazy: start-up (cli loads all commands)
-    from gsbench.grids.runs_folder import owned_runs_folder  # lazy: start-up (cli loads all commands)
+    known = claims_plan.CLAIM_GRIDS + claims_plan.CONTROL_GRIDS
     names = tuple(args.grids) if args.grids else None
-    unknown = [n for n in names or () if n not in CLAIM_GRIDS + CONTROL_GRIDS]
+    unknown = [n for n in names or () if n not in known]
     if unknown:
-        raise InputError(f"--grids: {', '.join(unknown)} not in the claims plan "
-                         f"({', '.join(CLAIM_GRIDS + CONTROL_GRIDS)})")
-    plan = plan_grids(quick=args.quick, names=names)
+        raise InputError(f"--grids: {', '.join(unknown)} not in the claims plan ({', '.join(known)})")
+    plan = claims_plan.plan_grids(quick=args.quick, names=names)
     if args.list:
         for g in plan:
             print(f"{g.name:28s} study={g.study:22s} cells={len(g.cells()):4d}  {g.description}")
@@ -57,9 +60,6 @@ def _run_plan(args: argparse.Namespace, plan: list) -> int:
     """Every grid of the plan into args.out, then the report into args.out/report (under the folder's lock)."""
     from concurrent.futures.process import BrokenProcessPool
 
-    from gsbench import grids  # lazy: start-up (cli loads all commands)
-    from gsbench.grids.executors import make_executor  # lazy: start-up (cli loads all commands)
-    from gsbench.grids.store import repo_store, reuse_published  # lazy: start-up (cli loads all commands)
     from gsbench.reports.build import build_report  # lazy: start-up (cli loads all commands)
     executor = make_executor(args.executor, jobs=args.jobs, folder=args.out / ".submitit", cluster=args.cluster,
                              progress=not args.no_progress)

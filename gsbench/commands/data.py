@@ -3,10 +3,11 @@ from __future__ import annotations
 
 import argparse
 
+from gsbench.datasets import LAYOUTS
+from gsbench.datasets.check import check_folder
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from gsbench.datasets import LAYOUTS  # lazy: start-up (cli loads all commands)
-
     sub = parser.add_subparsers(dest="data_command", metavar="SUBCOMMAND", required=True)
     p = sub.add_parser("check", help="print a scene folder's layout, views, labels and every problem (exit 1 on any)",
                        description="Read a scene folder as training and evaluation would: the layout, views, "
@@ -17,8 +18,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench.datasets.check import check_folder  # lazy: start-up (cli loads all commands)
-
     rep = check_folder(args.path, args.layout)
     print("\n".join(rep.lines()))
     return 0 if rep.ok else 1

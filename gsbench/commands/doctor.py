@@ -3,7 +3,7 @@
 Prints torch and its CUDA build, the CUDA devices torch sees, gsplat with the state of its CUDA
 extension (found from the files, never compiled here unless --build-gsplat asks), numba and the
 `cpu` backend, and the device and render backend that each shipped preset resolves to with
-`train.device: auto` (gsbench.methods.device: the same code training uses).
+`train.device: auto` (gsbench.methods.backend_choice: the same code training uses).
 """
 from __future__ import annotations
 
@@ -12,7 +12,9 @@ import os
 import platform
 
 from gsbench.config import load_config
+from gsbench.device import resolve_device
 from gsbench.errors import InputError
+from gsbench.methods.backend_choice import resolve_backend_for
 from gsbench.render.gsplat_ext import NEEDS_BUILD, build_gsplat_extension, gsplat_status
 
 PRESETS = ("default", "cpu-small", "cpu-medium", "paper")
@@ -66,8 +68,6 @@ def _numba_lines() -> list[str]:
 
 
 def _auto_lines() -> list[str]:
-    from gsbench.device import resolve_device  # lazy: start-up (cli loads all commands)
-    from gsbench.methods.device import resolve_backend_for  # lazy: start-up (cli loads all commands)
     lines = ["auto picks (train.device and backend as each preset sets them):"]
     for preset in PRESETS:
         cfg = load_config("gaussiands", None if preset == "default" else preset, [])

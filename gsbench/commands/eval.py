@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gsbench import evaluation as evaluate
 from gsbench.errors import InputError
-from gsbench.previews import PREVIEWS_DIR, read_manifest
+from gsbench.preview_files import PREVIEWS_DIR, read_manifest
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,7 +28,6 @@ def _fmt(v) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench import evaluation as evaluate  # lazy: start-up (cli loads all commands)
     if args.masks is not None:
         if args.run_dir is not None:
             raise InputError("give either RUN_DIR or --masks, not both")

@@ -4,10 +4,11 @@ from __future__ import annotations
 import argparse
 import time
 
+from gsbench.datasets import load_scene
+from gsbench.datasets.synthetic import LAYOUT_CHOICES, PRESETS, make_scene, parse_resolution
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from gsbench.datasets.synthetic import LAYOUT_CHOICES, PRESETS  # lazy: start-up (cli loads all commands)
-
     parser.add_argument("--preset", required=True, choices=sorted(PRESETS), help="scene preset")
     parser.add_argument("--out", required=True, help="output folder (must not exist or be empty)")
     parser.add_argument("--seed", type=int, default=0, help="layout / camera seed (default 0)")
@@ -22,9 +23,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench.datasets import load_scene  # lazy: start-up (cli loads all commands)
-    from gsbench.datasets.synthetic import make_scene, parse_resolution  # lazy: start-up (cli loads all commands)
-
     res = parse_resolution(args.resolution) if args.resolution else None
     t0 = time.perf_counter()
     out = make_scene(args.preset, args.out, seed=args.seed, views=args.views, resolution=res, layout=args.layout,

@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gsbench.datasets import load_scene
+from gsbench.datasets.colmap import find_model_dir
+from gsbench.datasets.triangulate import triangulate_scene, write_points
 from gsbench.errors import InputError
 from gsbench.store import write_json_atomic
 
@@ -20,10 +23,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
     import pycolmap
-
-    from gsbench.datasets import load_scene  # lazy: start-up (cli loads all commands)
-    from gsbench.datasets.colmap import find_model_dir  # lazy: start-up (cli loads all commands)
-    from gsbench.datasets.triangulate import triangulate_scene, write_points  # lazy: start-up (cli loads all commands)
 
     pycolmap.logging.minloglevel = pycolmap.logging.WARNING  # COLMAP's per-image INFO lines would bury the summary
     scene = load_scene(args.scene, layout=args.layout)

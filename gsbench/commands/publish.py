@@ -13,6 +13,7 @@ import argparse
 from pathlib import Path
 
 from gsbench.errors import InputError
+from gsbench.grids.store import classify, format_store_status, plan_for, publish, read_store, repo_store
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,7 +37,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _store(path, option: str) -> Path:
     """The given store, else the repository's results/cpu."""
-    from gsbench.grids.store import repo_store  # lazy: start-up (cli loads all commands)
     if path:
         return Path(path)
     found = repo_store()
@@ -53,7 +53,6 @@ def run(args: argparse.Namespace) -> int:
                          + (f" (got {', '.join(modes)})" if modes else ""))
     if args.runs is not None and args.to is None:
         raise InputError("RUNS needs --to STORE (the store to add the cells to)")
-    from gsbench.grids.store import plan_for  # lazy: start-up (cli loads all commands)
     grids = plan_for(args.grids, args.quick)
     if args.runs is not None:
         return _publish(args.runs, args.to, grids)
@@ -63,7 +62,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _publish(runs: Path, store: Path, grids: list) -> int:
-    from gsbench.grids.store import publish  # lazy: start-up (cli loads all commands)
     rep = publish(runs, store, grids)
     if rep.refused:
         for run_dir, why in rep.refused:
@@ -77,7 +75,6 @@ def _publish(runs: Path, store: Path, grids: list) -> int:
 
 
 def _status(store: Path, grids: list) -> int:
-    from gsbench.grids.store import classify, format_store_status, read_store  # lazy: start-up
     cells = read_store(store)
     current, stale = classify(cells, grids)
     print(format_store_status(cells, current, stale, grids))
@@ -85,7 +82,6 @@ def _status(store: Path, grids: list) -> int:
 
 
 def _page(args: argparse.Namespace, store: Path, grids: list) -> int:
-    from gsbench.grids.store import classify, read_store  # lazy: start-up (cli loads all commands)
     from gsbench.reports.claims_page import build_page, check_page, figure_folder, write_page  # lazy: start-up
     if args.check and not args.page.is_file():
         raise InputError(f"{args.page}: page not found (generate it without --check first)")

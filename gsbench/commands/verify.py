@@ -7,6 +7,8 @@ import argparse
 from pathlib import Path
 
 from gsbench.errors import InputError
+from gsbench.grids.store import read_store
+from gsbench.grids.verify import draw, format_check, verify
 from gsbench.numerics import NUMERICS_VERSION
 
 
@@ -17,8 +19,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gsbench.grids.store import read_store  # lazy: start-up (cli loads all commands)
-    from gsbench.grids.verify import draw, format_check, verify  # lazy: start-up (cli loads all commands)
     if args.cells < 1:
         raise InputError(f"--cells: expected at least 1, got {args.cells}")
     cells = read_store(args.store)

@@ -1,6 +1,6 @@
 """The pictures of an evaluation: for a few labelled frames per protocol, the render, its depth and
 each query's predicted and GT mask, with the metrics of that frame; for removal, the render before
-and after. Saved in the run folder (contract: gsbench.previews) for the report to place.
+and after. Saved in the run folder (contract: gsbench.preview_files) for the report to place.
 
 The masks and numbers come from the same metric functions as the scores in results.json, at the
 same camera (protocol, frame set, resolution, query mode), so a picture shows what was scored.
@@ -16,7 +16,7 @@ import numpy as np
 from gsbench.config import setting
 from gsbench.metrics import image as MI
 from gsbench.metrics import lerf, ovs3d
-from gsbench.previews import remove_previews, write_previews
+from gsbench.preview_files import remove_previews, write_previews
 from gsbench.resize import resize_area, resize_nearest, resize_rgb
 
 from .block import to_numpy

@@ -18,6 +18,7 @@ from gsbench.metrics import ordering as MO
 from gsbench.results import run_results
 from gsbench.runlock import RunLock
 from gsbench.store import read_json, write_json_atomic
+from gsbench.trained_run import load_run
 
 from .block import Block
 from .depth import depth_metrics
@@ -101,7 +102,6 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
     import torch
 
     t_start = time.time()
-    from gsbench.runs import load_run  # lazy: gsbench.runs imports gsbench.evaluation (same-floor cycle)
     method, config, scene = load_run(run_dir)
     peaks = PeakMemory(getattr(method, "device", None)).start()
     protocol = requested_protocol(protocol, config)

@@ -29,21 +29,23 @@ results.json exists and is not a failure record: a failed cell also gets a resul
 "failed", null metrics and the error as each metric's reason in `skipped` (so reports show "n/a (run failed)" instead
 of "no run"); it stays failed on a re-run and `--retry-failed` runs it again.
 
-Modules, one job each: spec (grid files -> Grid, cells), planning (scenes, cell configs, run ids,
+Modules, one job each: grid_file (grid files -> Grid, cells), planning (scenes, cell configs, run ids,
 manifest), liveness (cell_status.json, pid and heartbeat checks), running (a cell, a grid),
 priors_share (priors shared by several cells), failed (results.json of a failed cell), status
-(the status table), executors (local pool, serial, submitit), claims (the grids `gsbench claims`
-runs, and their --quick variant).
+(the status table), executors (local pool, serial, submitit), claims_plan (the grids `gsbench
+claims` runs, and their --quick variant), store (the published results store), verify (re-running
+published cells).
 """
 from gsbench.grids.failed import write_failed_results
 
+from gsbench.grids.grid_file import (GRID_DIR, STUDIES, Cell, Grid, SceneSpec, find_grid, load_grid,  # isort: skip
+                                     parse_grid, shipped_grids)
 from gsbench.grids.liveness import (CELL_FILE, CELL_STATUS_FILE, HEARTBEAT_S, STALE_AFTER_S, cell_state,  # isort: skip
                                     pid_alive, read_cell_status, results_finished)
 from gsbench.grids.planning import (CACHE_DIRNAME, SCENES_DIRNAME, PlannedCell, cell_config, plan,  # isort: skip
                                     resolve_scene, write_manifest)
 from gsbench.grids.priors_share import prepare_priors_job, priors_request, shared_priors
 from gsbench.grids.running import GridReport, classify, run_cell, run_grid
-from gsbench.grids.spec import GRID_DIR, STUDIES, Cell, Grid, SceneSpec, find_grid, load_grid, parse_grid, shipped_grids
 from gsbench.grids.status import format_status, planned_rows, status_rows
 from gsbench.store import read_json
 

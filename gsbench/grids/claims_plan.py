@@ -3,13 +3,13 @@ read, and the --quick variant of the same plan (tiny scale, two seeds) for CI an
 
 Why here: the claims command runs these grids with the ordinary grid machinery (run_grid, the
 executors, resume), so the plan is a list of grid names plus, for --quick, the overrides that
-shrink every cell; the report side (reports/claims.py) only reads the studies these grids record.
+shrink every cell; the report side (reports/claims_table.py) only reads the studies these grids record.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 
-from gsbench.grids.spec import Grid, SceneSpec, load_grid
+from gsbench.grids.grid_file import Grid, SceneSpec, load_grid
 
 # the studies of the paper-claims table, then the positive controls (docs/grids.md)
 CLAIM_GRIDS: tuple[str, ...] = (

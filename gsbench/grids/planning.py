@@ -14,7 +14,7 @@ from gsbench.config import run_id as make_run_id
 from gsbench.datasets import scene_fingerprint
 from gsbench.datasets.synthetic import make_scene
 from gsbench.errors import InputError
-from gsbench.grids.spec import Cell, Grid, SceneSpec
+from gsbench.grids.grid_file import Cell, Grid, SceneSpec
 from gsbench.store import write_json_atomic
 
 CACHE_DIRNAME = rundir.CACHE_DIRNAME

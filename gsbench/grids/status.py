@@ -4,9 +4,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Optional
 
+from gsbench.grids.grid_file import Grid, SceneSpec
 from gsbench.grids.liveness import CELL_FILE, cell_state, read_cell_status
 from gsbench.grids.planning import PlannedCell, plan
-from gsbench.grids.spec import Grid, SceneSpec
 from gsbench.store import read_json
 
 

@@ -29,10 +29,10 @@ from gsbench.config import canonical, flatten, short_repr
 from gsbench.config import run_id as make_run_id
 from gsbench.datasets import load_scene
 from gsbench.errors import InputError
-from gsbench.grids.claims import CLAIM_GRIDS, CONTROL_GRIDS, plan_grids
+from gsbench.grids.claims_plan import CLAIM_GRIDS, CONTROL_GRIDS, plan_grids
+from gsbench.grids.grid_file import Grid, load_grid
 from gsbench.grids.liveness import cell_state
 from gsbench.grids.planning import PlannedCell, cell_config, plan
-from gsbench.grids.spec import Grid, load_grid
 from gsbench.methods.registry import resolve_for_scene
 from gsbench.metric_table import TIMING_NAMES
 from gsbench.numerics import NUMERICS_VERSION

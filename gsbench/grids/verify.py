@@ -22,9 +22,9 @@ from gsbench import rundir
 from gsbench.datasets import scene_fingerprint
 from gsbench.environment import cpu_facts
 from gsbench.errors import InputError
+from gsbench.grids.grid_file import SceneSpec
 from gsbench.grids.planning import resolve_scene
 from gsbench.grids.running import run_cell
-from gsbench.grids.spec import SceneSpec
 from gsbench.grids.store import MetricRow, Published, compare_metrics
 from gsbench.numerics import NUMERICS_VERSION
 from gsbench.store import read_json

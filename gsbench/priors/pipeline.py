@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence, TypeVar
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -191,6 +191,189 @@ def _mask_stats(scene, views, order, size, masks, images: _Images, per_frame: bo
     return stats, skipped
 
 
+@dataclass
+class _Run:
+    """What every prior stage of one `prepare_priors` call shares: its inputs, the cache, the images, and
+    the providers / skipped / stats / cache records the stages fill in (in stage order)."""
+
+    scene: object
+    views: list[int]
+    size: tuple[int, int]
+    seed: int
+    progress: bool
+    device: str | None
+    cache: PriorCache
+    images: _Images
+    providers: dict
+    skipped: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+    cache_info: dict = field(default_factory=dict)
+    _content: dict | None = None
+
+    def scene_content(self) -> dict:
+        """The scene part of a cache key; hashed on first use only (a run with every prior skipped never hashes)."""
+        if self._content is None:
+            self._content = {"scene": scene_content_hash(self.scene), "views": sorted(self.views),
+                             "size": list(self.size)}
+        return self._content
+
+
+_T = TypeVar("_T")
+
+
+def _cached(run: _Run, part: str, key: str, load: Callable[[dict, dict], _T], compute: Callable[[], _T],
+            save: Callable[[_T], tuple[dict, dict]]) -> _T:
+    """The cache read / compute / cache write every prior kind (`part`) goes through: `load(arrays, meta)`
+    rebuilds the value from a hit; on a miss `compute()` makes it and `save(value)` gives the (arrays, meta)
+    to store. Records the key and whether it hit in `run.cache_info[part]`."""
+    hit = run.cache.load(part, key)
+    if hit is not None:
+        value = load(*hit)
+    else:
+        value = compute()
+        run.cache.save(part, key, *save(value))
+    run.cache_info[part] = {"key": key, "hit": hit is not None}
+    return value
+
+
+def _order_stage(run: _Run, cfg: Mapping) -> list[int]:
+    """The view order (priors.ordering) and its mean adjacent camera distance."""
+    mode = cfg.get("ordering", "pose")
+    if mode not in ORDERINGS:
+        raise InputError(f"priors.ordering: unknown ordering {mode!r} (expected one of {', '.join(ORDERINGS)})")
+    order = order_views(run.scene.cameras, run.views, mode, run.seed)
+    run.providers["ordering"] = mode
+    run.stats["ordering_adjacent_distance"] = MO.mean_adjacent_distance(camera_centers(run.scene.cameras, order),
+                                                                        list(range(len(order))))
+    return order
+
+
+def _depth_save(depth: dict[int, D.DepthPrior], views: list[int]) -> tuple[dict, dict]:
+    kinds = {p.kind for p in depth.values()}
+    arrays = {}
+    for v, p in depth.items():
+        arrays[f"values_{v}"] = p.values
+        arrays[f"valid_{v}"] = p.valid
+    first = depth[views[0]]
+    return arrays, {"kind": first.kind, "provider": first.provider, "kinds": sorted(kinds)}
+
+
+def _depth_stage(run: _Run, cfg: Mapping) -> dict[int, D.DepthPrior] | None:
+    """The depth prior (cached), with the depth-noise study's noise applied after the cache; None when
+    `priors.depth.provider` is none."""
+    dcfg = dict(cfg.get("depth", {}) or {})
+    pid = D.depth_provider_id(dcfg)
+    if pid is None:
+        run.skipped["depth"] = "priors.depth.provider=none"
+        return None
+    scene, views, seed = run.scene, run.views, run.seed
+    params = {k: v for k, v in dcfg.items() if k != "noise"}
+    params["seed"] = seed
+    params["model_files"] = (_folder_signature(dcfg.get("model_path"))
+                             if dcfg.get("provider") == "depth-anything" else [])
+    if dcfg.get("provider") == "sfm":   # the scene fingerprint leaves the points out
+        params["points"] = points_digest(scene)
+    key = cache_key("depth", pid, PIPELINE_VERSION, params, run.scene_content())
+    depth = _cached(
+        run, "depth", key,
+        lambda arrays, meta: {v: D.DepthPrior(arrays[f"values_{v}"], arrays[f"valid_{v}"].astype(bool),
+                                              meta["kind"], meta["provider"]) for v in views},
+        lambda: D.compute_depth(scene, dcfg, views, run.size, seed, run.progress, device=run.device),
+        lambda d: _depth_save(d, views))
+    depth = D.apply_depth_noise(depth, dcfg.get("noise"), seed)
+    run.providers["depth"] = depth[views[0]].provider
+    return depth
+
+
+def _mask_stage(run: _Run, cfg: Mapping, order: list[int], per_frame_masks: bool
+                ) -> tuple[dict[int, np.ndarray], str]:
+    """The masks (cached), their track count, and the ordering study's adjacent mask IoUs (cached too:
+    optical flow and depth warps over every view pair, keyed by the masks and the order). Returns the
+    masks and their cache key (the features' key builds on it)."""
+    scene, views, seed = run.scene, run.views, run.seed
+    mcfg = dict(cfg.get("masks", {}) or {})
+    prov = mcfg.get("provider", "simulated")
+    if prov not in MASK_PROVIDERS:
+        raise InputError(f"priors.masks.provider: unknown provider {prov!r} "
+                         f"(expected one of {', '.join(MASK_PROVIDERS)})")
+    params = dict(mcfg)
+    params.update(seed=seed, per_frame=bool(per_frame_masks),
+                  order=list(order) if (prov != "gt" and not per_frame_masks) else None,
+                  sim_version=M.SIM_VERSION)
+    if prov == "sam2":
+        params["model_files"] = _folder_signature(mcfg.get("checkpoint"))
+    from_labels = prov == "gt" and not scene.has_instances
+    if from_labels:
+        params["labels"] = L.label_digest(scene, views)
+    mkey = cache_key("masks", prov, PIPELINE_VERSION, params, run.scene_content())
+    masks, mid = _cached(
+        run, "masks", mkey,
+        lambda arrays, meta: ({v: arrays[f"m_{v}"].astype(np.int32) for v in views}, meta["provider"]),
+        lambda: _compute_masks(scene, mcfg, views, order, run.size, run.images, bool(per_frame_masks), seed,
+                               run.progress, device=run.device),
+        lambda mm: ({f"m_{v}": mm[0][v] for v in views}, {"provider": mm[1]}))
+    run.providers["masks"] = mid
+    ids = np.unique(np.concatenate([m[m >= 0].ravel() for m in masks.values()])) if masks else []
+    run.stats["mask_tracks"] = int(len(ids))
+    if from_labels:   # views without labels have no segment, hence no semantic target
+        run.stats["mask_labelled_views"] = int(sum(bool((masks[v] >= 0).any()) for v in views))
+    skey = cache_key("mask-stats", mid, PIPELINE_VERSION, {"order": list(order)}, {"masks": mkey})
+    mstats, mskipped = _cached(
+        run, "mask-stats", skey,
+        lambda arrays, meta: (meta["stats"], meta["skipped"]),
+        lambda: _mask_stats(scene, views, order, run.size, masks, run.images, per_frame_masks),
+        lambda ss: ({}, {"stats": ss[0], "skipped": ss[1]}))
+    run.stats.update(mstats)
+    run.skipped.update(mskipped)
+    return masks, mkey
+
+
+def _load_features(arrays: Mapping[str, np.ndarray]) -> dict[tuple[int, int], np.ndarray]:
+    mask_features = {}
+    for k, vec in arrays.items():
+        _, v, t = k.split("_")
+        mask_features[(int(v), int(t))] = vec.astype(np.float32)
+    return mask_features
+
+
+def _encode_features(run: _Run, fprov: FeatureProvider, masks: dict[int, np.ndarray]
+                     ) -> dict[tuple[int, int], np.ndarray]:
+    mask_features = {}
+    for v in tqdm(run.views, desc=f"mask features ({fprov.id})", disable=not run.progress, leave=False):
+        img = run.images[v] if fprov.needs_image else None
+        for t, vec in fprov.encode_masks(run.scene, v, img, masks[v], run.seed).items():
+            mask_features[(v, int(t))] = vec
+    return mask_features
+
+
+def _feature_stage(run: _Run, cfg: Mapping, masks: dict[int, np.ndarray], mkey: str, per_frame_masks: bool
+                   ) -> tuple[dict[tuple[int, int], np.ndarray], FeatureProvider]:
+    """Per-(view, mask) features (cached, keyed by the masks' key), track-averaged when
+    `priors.features.per_track` asks."""
+    scene = run.scene
+    fprov = get_feature_provider(dict(cfg.get("features", {}) or {}), device=run.device)
+    fparams = dict(fprov.cache_params())
+    fparams["seed"] = run.seed
+    if (cfg.get("features", {}) or {}).get("provider") == "openclip":
+        fparams["model_files"] = _folder_signature(cfg["features"].get("checkpoint"))
+    if isinstance(fprov, TextAlignedFeatures) and not scene.has_instances and L.label_source(scene):
+        fparams["labels"] = L.label_digest(scene, run.views)   # the classes it names masks by
+    fkey = cache_key("features", fprov.id, PIPELINE_VERSION, fparams, {"masks": mkey})
+    mask_features = _cached(
+        run, "features", fkey,
+        lambda arrays, meta: _load_features(arrays),
+        lambda: _encode_features(run, fprov, masks),
+        lambda mf: ({f"f_{v}_{t}": vec for (v, t), vec in mf.items()}, {"provider": fprov.id}))
+    run.providers["features"] = fprov.id
+    if bool((cfg.get("features", {}) or {}).get("per_track", False)):
+        if per_frame_masks:
+            run.skipped["features.per_track"] = "per-frame masks have no tracks across views"
+        else:
+            mask_features = track_mean_features(mask_features)
+            run.providers["features"] = fprov.id + "+track-mean"
+    return mask_features, fprov
+
+
 def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tuple[int, int],
                    cache_dir: Path | None, need_depth: bool, need_masks: bool, need_features: bool,
                    per_frame_masks: bool = False, seed: int = 0, progress: bool = True,
@@ -207,163 +390,41 @@ def prepare_priors(scene, priors_cfg: dict, view_ids: list[int], image_size: tup
     views, size = _check_inputs(scene, view_ids, image_size)
     cache = PriorCache(cache_dir)
     seed = int(seed)
-    providers: dict = {"depth": None, "masks": None, "features": None}
-    skipped: dict = {}
-    stats: dict = {}
-    cache_info: dict = {}
+    run = _Run(scene, views, size, seed, progress, device, cache, images=_Images(scene, size),
+               providers={"depth": None, "masks": None, "features": None})
     stages = 1 + int(need_depth) + int(need_masks or need_features) + int(need_features)
     bar = tqdm(total=stages, desc="priors", disable=not progress)
 
-    # ---------------------------------------------------------------- ordering
-    mode = cfg.get("ordering", "pose")
-    if mode not in ORDERINGS:
-        raise InputError(f"priors.ordering: unknown ordering {mode!r} (expected one of {', '.join(ORDERINGS)})")
-    order = order_views(scene.cameras, views, mode, seed)
-    providers["ordering"] = mode
-    stats["ordering_adjacent_distance"] = MO.mean_adjacent_distance(camera_centers(scene.cameras, order),
-                                                                    list(range(len(order))))
+    order = _order_stage(run, cfg)
     bar.update(1)
 
-    content = None
-
-    def scene_content():
-        nonlocal content
-        if content is None:
-            content = {"scene": scene_content_hash(scene), "views": sorted(views), "size": list(size)}
-        return content
-
-    images = _Images(scene, size)
-
-    # ---------------------------------------------------------------- depth
     depth = None
     if need_depth:
-        dcfg = dict(cfg.get("depth", {}) or {})
-        pid = D.depth_provider_id(dcfg)
-        if pid is None:
-            skipped["depth"] = "priors.depth.provider=none"
-        else:
-            params = {k: v for k, v in dcfg.items() if k != "noise"}
-            params["seed"] = seed
-            params["model_files"] = (_folder_signature(dcfg.get("model_path"))
-                                     if dcfg.get("provider") == "depth-anything" else [])
-            if dcfg.get("provider") == "sfm":   # the scene fingerprint leaves the points out
-                params["points"] = points_digest(scene)
-            key = cache_key("depth", pid, PIPELINE_VERSION, params, scene_content())
-            hit = cache.load("depth", key)
-            if hit is not None:
-                arrays, meta = hit
-                depth = {v: D.DepthPrior(arrays[f"values_{v}"], arrays[f"valid_{v}"].astype(bool),
-                                         meta["kind"], meta["provider"]) for v in views}
-            else:
-                depth = D.compute_depth(scene, dcfg, views, size, seed, progress, device=device)
-                kinds = {p.kind for p in depth.values()}
-                arrays = {}
-                for v, p in depth.items():
-                    arrays[f"values_{v}"] = p.values
-                    arrays[f"valid_{v}"] = p.valid
-                first = depth[views[0]]
-                cache.save("depth", key, arrays, {"kind": first.kind, "provider": first.provider,
-                                                  "kinds": sorted(kinds)})
-            cache_info["depth"] = {"key": key, "hit": hit is not None}
-            depth = D.apply_depth_noise(depth, dcfg.get("noise"), seed)
-            providers["depth"] = depth[views[0]].provider
+        depth = _depth_stage(run, cfg)
         bar.update(1)
     else:
-        skipped["depth"] = "not needed by the method"
+        run.skipped["depth"] = "not needed by the method"
 
-    # ---------------------------------------------------------------- masks
     masks = None
     mkey = None
     if need_masks or need_features:
-        mcfg = dict(cfg.get("masks", {}) or {})
-        prov = mcfg.get("provider", "simulated")
-        if prov not in MASK_PROVIDERS:
-            raise InputError(f"priors.masks.provider: unknown provider {prov!r} "
-                             f"(expected one of {', '.join(MASK_PROVIDERS)})")
-        params = dict(mcfg)
-        params.update(seed=seed, per_frame=bool(per_frame_masks),
-                      order=list(order) if (prov != "gt" and not per_frame_masks) else None,
-                      sim_version=M.SIM_VERSION)
-        if prov == "sam2":
-            params["model_files"] = _folder_signature(mcfg.get("checkpoint"))
-        from_labels = prov == "gt" and not scene.has_instances
-        if from_labels:
-            params["labels"] = L.label_digest(scene, views)
-        mkey = cache_key("masks", prov, PIPELINE_VERSION, params, scene_content())
-        hit = cache.load("masks", mkey)
-        if hit is not None:
-            arrays, meta = hit
-            masks = {v: arrays[f"m_{v}"].astype(np.int32) for v in views}
-            mid = meta["provider"]
-        else:
-            masks, mid = _compute_masks(scene, mcfg, views, order, size, images, bool(per_frame_masks), seed, progress,
-                                        device=device)
-            cache.save("masks", mkey, {f"m_{v}": masks[v] for v in views}, {"provider": mid})
-        cache_info["masks"] = {"key": mkey, "hit": hit is not None}
-        providers["masks"] = mid
-        ids = np.unique(np.concatenate([m[m >= 0].ravel() for m in masks.values()])) if masks else []
-        stats["mask_tracks"] = int(len(ids))
-        if from_labels:   # views without labels have no segment, hence no semantic target
-            stats["mask_labelled_views"] = int(sum(bool((masks[v] >= 0).any()) for v in views))
-        # adjacent mask IoU of the propagated masks (the ordering study's second metric): optical flow
-        # and depth warps over every view pair, so cached too (keyed by the masks and the order)
-        skey = cache_key("mask-stats", mid, PIPELINE_VERSION, {"order": list(order)}, {"masks": mkey})
-        shit = cache.load("mask-stats", skey)
-        if shit is not None:
-            mstats, mskipped = shit[1]["stats"], shit[1]["skipped"]
-        else:
-            mstats, mskipped = _mask_stats(scene, views, order, size, masks, images, per_frame_masks)
-            cache.save("mask-stats", skey, {}, {"stats": mstats, "skipped": mskipped})
-        stats.update(mstats)
-        skipped.update(mskipped)
-        cache_info["mask-stats"] = {"key": skey, "hit": shit is not None}
+        masks, mkey = _mask_stage(run, cfg, order, per_frame_masks)
         bar.update(1)
     else:
-        skipped["masks"] = "not needed by the method"
+        run.skipped["masks"] = "not needed by the method"
 
-    # ---------------------------------------------------------------- features
     mask_features = None
     fprov = None
     if need_features:
-        fprov = get_feature_provider(dict(cfg.get("features", {}) or {}), device=device)
-        fparams = dict(fprov.cache_params())
-        fparams["seed"] = seed
-        if (cfg.get("features", {}) or {}).get("provider") == "openclip":
-            fparams["model_files"] = _folder_signature(cfg["features"].get("checkpoint"))
-        if isinstance(fprov, TextAlignedFeatures) and not scene.has_instances and L.label_source(scene):
-            fparams["labels"] = L.label_digest(scene, views)   # the classes it names masks by
-        fkey = cache_key("features", fprov.id, PIPELINE_VERSION, fparams, {"masks": mkey})
-        hit = cache.load("features", fkey)
-        if hit is not None:
-            arrays, _ = hit
-            mask_features = {}
-            for k, vec in arrays.items():
-                _, v, t = k.split("_")
-                mask_features[(int(v), int(t))] = vec.astype(np.float32)
-        else:
-            mask_features = {}
-            for v in tqdm(views, desc=f"mask features ({fprov.id})", disable=not progress, leave=False):
-                img = images[v] if fprov.needs_image else None
-                for t, vec in fprov.encode_masks(scene, v, img, masks[v], seed).items():
-                    mask_features[(v, int(t))] = vec
-            cache.save("features", fkey, {f"f_{v}_{t}": vec for (v, t), vec in mask_features.items()},
-                       {"provider": fprov.id})
-        cache_info["features"] = {"key": fkey, "hit": hit is not None}
-        providers["features"] = fprov.id
-        if bool((cfg.get("features", {}) or {}).get("per_track", False)):
-            if per_frame_masks:
-                skipped["features.per_track"] = "per-frame masks have no tracks across views"
-            else:
-                mask_features = track_mean_features(mask_features)
-                providers["features"] = fprov.id + "+track-mean"
+        mask_features, fprov = _feature_stage(run, cfg, masks, mkey, per_frame_masks)
         bar.update(1)
     else:
-        skipped["features"] = "not needed by the method"
+        run.skipped["features"] = "not needed by the method"
     bar.close()
 
     return Priors(order=order, depth=depth, masks=masks if (need_masks or need_features) else None,
-                  mask_features=mask_features, feature_provider=fprov, providers=providers,
-                  skipped=skipped, stats=stats, cache=cache_info)
+                  mask_features=mask_features, feature_provider=fprov, providers=run.providers,
+                  skipped=run.skipped, stats=run.stats, cache=run.cache_info)
 
 
 def track_mean_features(features: Mapping[tuple[int, int], np.ndarray]) -> dict[tuple[int, int], np.ndarray]:

@@ -59,12 +59,12 @@ import torch
 
 from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField, sh_rgb
-from gsbench.phases import timed
 from gsbench.render import cpu_binning, cpu_bounds, cpu_sched, rules
 from gsbench.render import cpu_kernels as K
 from gsbench.render import cpu_projection as P
 from gsbench.render.projection import Projected, camera_tensors
 from gsbench.render.threads import kernel_threads, select_numba_threading_layer, tbb_unusable
+from gsbench.step_timers import timed
 
 # Must precede the first parallel kernel launch (gsbench.render chose it, in the environment; numba
 # re-reads its configuration from the environment whenever os.environ changes).

@@ -1,7 +1,7 @@
-"""Run folders: train a method into one (resumable, idempotent) and load it back.
+"""Run folders: train a method into one (resumable, idempotent).
 
     run_dir = train_run(config, scene_path, run_dir)      # config from gsbench.config.load_config
-    method, config, scene = load_run(run_dir)
+    method, config, scene = load_run(run_dir)             # gsbench.trained_run: the folder read back
 
 Files (see gsbench/store.py): config.json (resolved: scene, run_id, dropped), env.json, status.json,
 train_log.jsonl, checkpoint.pt (trainer state, for resume), model.pt (the trained Method),
@@ -27,7 +27,6 @@ from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.device import resolve_device
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError, NonFiniteError, interrupted
-from gsbench.methods.base import Method
 from gsbench.methods.registry import get_method, resolve_for_scene
 from gsbench.render.threads import numba_threading_layer
 from gsbench.runlock import RunLock
@@ -46,7 +45,7 @@ def _fingerprint(scene_path) -> str:
 
 
 def _device(cfg: dict) -> str:
-    """The device training uses, for the memory counters (methods.device.resolve_device). A config
+    """The device training uses, for the memory counters (gsbench.device.resolve_device). A config
     it refuses gets "cpu" here: training raises the same error next and records it in status.json."""
     try:
         return str(resolve_device(cfg))
@@ -145,21 +144,3 @@ def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s:
         summary["train_peak_cuda_mb"] = peaks["peak_cuda_mb"]
     write_json_atomic(run_dir / rundir.TRAIN_SUMMARY, summary)
     rundir.write_status(run_dir, state, message, train_s_so_far=train_s)
-
-
-def load_run(run_dir: str | Path):
-    """(trained Method, resolved config, Scene) of a finished run folder. Its config.json must name the
-    method of its model.pt (the model file records its method): a folder mixing two runs is refused."""
-    run_dir = Path(run_dir)
-    st = rundir.read_status(run_dir)
-    if st is None:
-        raise FileNotFoundError(f"{run_dir / 'status.json'}: not a run folder (no status.json)")
-    if st.get("state") != "done":
-        raise InputError(f"{run_dir}: run is not finished (status {st.get('state')!r}: {st.get('message', '')})")
-    cfg = run_config(read_json(run_dir / rundir.CONFIG), run_dir / rundir.CONFIG)
-    method = Method.load(run_dir / rundir.MODEL)
-    if method.name != cfg["method"]:
-        raise InputError(f"{run_dir / rundir.CONFIG}: names method {cfg['method']!r}, but the model in "
-                         f"{rundir.MODEL} is {method.name!r} (the folder mixes two runs)")
-    scene = _load_scene(cfg["scene"]["path"])
-    return method, cfg, scene

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from typing import Callable, Optional
+from typing import Callable, NamedTuple, Optional
 
 import numpy as np
 import torch
@@ -51,14 +51,42 @@ def _loss_case(comp: str, fn: Callable[..., Optional[torch.Tensor]], inputs: lis
     return _result(comp, o32, o64, g32, g64, out_tol, grad_tol, note=note, extra_ok=extra_ok)
 
 
-def loss_cases() -> list[Case]:
-    """Each training loss in float32 vs float64 on regular and extreme inputs (gradients included)."""
-    cases: list[Case] = []
+def _adder(cases: list[Case]) -> Callable[[str, str, Callable[[], CaseResult]], None]:
+    """`add(component, name, fn)` appending one Case to `cases`: keeps each case below to one call."""
 
     def add(comp, name, fn):
         cases.append(Case(comp, name, fn))
 
-    # L_rec = 0.8 L1 + 0.2 (1 - SSIM)
+    return add
+
+
+class _SemInputs(NamedTuple):
+    """Rendered and target latents, and the target / edge masks, shared by the L_sem, L_ds and edge cases."""
+
+    s_hat: np.ndarray
+    s_tgt: np.ndarray
+    has: np.ndarray
+    full: np.ndarray
+    empty: np.ndarray
+    sem_ref: float
+
+
+def _sem_inputs() -> _SemInputs:
+    rng = np.random.default_rng(3)
+    s_hat = rng.standard_normal((24, 32, 3))
+    s_tgt = rng.standard_normal((24, 32, 3))
+    has = np.ones((24, 32), bool)
+    has[:, :8] = False
+    full = np.ones((24, 32), bool)
+    empty = np.zeros((24, 32), bool)
+    sem_ref = float(np.abs(s_hat - s_tgt)[has].mean())
+    return _SemInputs(s_hat, s_tgt, has, full, empty, sem_ref)
+
+
+def _rec_loss_cases() -> list[Case]:
+    """L_rec = 0.8 L1 + 0.2 (1 - SSIM) on random, constant, 1x1 and out-of-range images."""
+    cases: list[Case] = []
+    add = _adder(cases)
     pred, gt = _images()
     add("loss:rec", "random images", lambda: _loss_case("loss:rec", reconstruction_loss, [pred, gt], [True, False]))
     c = np.full((24, 32, 3), 0.5)
@@ -72,9 +100,13 @@ def loss_cases() -> list[Case]:
                                                      out_tol=1e-4))
     add("loss:rec", "prediction far outside [0,1] (+-1e3)",
         lambda: _loss_case("loss:rec", reconstruction_loss, [(pred - 0.5) * 2e3, gt], [True, False], out_tol=1e-4))
+    return cases
 
-    # L_depth per formulation
-    depth, prior = _depth_pair()
+
+def _depth_loss_cases(depth: np.ndarray, prior: np.ndarray) -> list[Case]:
+    """L_depth per formulation, for depth and disparity priors, and rendered depth with zero rows."""
+    cases: list[Case] = []
+    add = _adder(cases)
     valid = np.ones(depth.shape, bool)
     for form in DEPTH_FORMULATIONS[1:]:
         for kind, pr in (("depth", prior), ("disparity", 1.0 / prior)):
@@ -90,8 +122,13 @@ def loss_cases() -> list[Case]:
                 lambda d, f=f: depth_loss(f, d, (1.0 / prior).astype(np.float32), valid, "disparity").loss,
                 [zd], [True], out_tol=1e-3 if f == "pearson" else 1e-4, grad_tol=1e-3,
                 note="pearson: 1 - corr cancels in float32 when corr ~ 1" if f == "pearson" else ""))
+    return cases
 
-    # L_tv
+
+def _tv_loss_cases(depth: np.ndarray) -> list[Case]:
+    """L_tv on flat depth (eps > 0 and eps = 0: no NaN gradient at sqrt(0)), regular, huge and 1x1 depth."""
+    cases: list[Case] = []
+    add = _adder(cases)
     const = np.full((24, 32), 2.0)
     eps = 1e-6
     add("loss:tv", "zero gradient (constant depth)",
@@ -105,16 +142,14 @@ def loss_cases() -> list[Case]:
         lambda: _loss_case("loss:tv", lambda d: tv_loss(d, eps), [depth * 1e6], [True], out_tol=1e-5))
     add("loss:tv", "1x1 depth", lambda: _loss_case("loss:tv", lambda d: tv_loss(d, eps), [np.full((1, 1), 3.0)], [True],
                                                   expect=0.0, expect_tol=1e-12))
+    return cases
 
-    # L_sem and L_ds
-    rng = np.random.default_rng(3)
-    s_hat = rng.standard_normal((24, 32, 3))
-    s_tgt = rng.standard_normal((24, 32, 3))
-    has = np.ones((24, 32), bool)
-    has[:, :8] = False
-    full = np.ones((24, 32), bool)
-    empty = np.zeros((24, 32), bool)
-    sem_ref = float(np.abs(s_hat - s_tgt)[has].mean())
+
+def _sem_ds_loss_cases(si: _SemInputs) -> list[Case]:
+    """L_sem and L_ds on partial, missing and huge targets, with empty and full edge maps."""
+    cases: list[Case] = []
+    add = _adder(cases)
+    s_hat, s_tgt, has, full, empty, sem_ref = si
 
     def sem_fn(has_m):
         return lambda a, b: sem_loss(a, b, torch.as_tensor(has_m))
@@ -139,6 +174,29 @@ def loss_cases() -> list[Case]:
                                                        expect=0.0, expect_tol=1e-12, note="zero loss, zero gradient"))
     add("loss:ds", "full edge map (equals L_sem)",
         lambda: _loss_case("loss:ds", ds_fn(full), [s_hat, s_tgt], [True, False], expect=sem_ref))
+    return cases
+
+
+def _nonfinite_blocks_case(full: np.ndarray) -> CaseResult:
+    """NaN / inf blocks count as invalid: edges only at the real depth step, none along the blocks."""
+    yy, xx = np.mgrid[0:24, 0:32]
+    p = 1.0 + 0.01 * xx + 0.005 * yy + (xx >= 16) * 1.0      # noise-free ramp with one step at x = 16
+    p[:8, :8] = np.nan
+    p[16:, 4:12] = np.inf
+    e = depth_edges(p, full)
+    at_step = e & (np.abs(xx - 15.5) <= 3)
+    elsewhere = int((e & ~at_step).sum())
+    ok = e.dtype == bool and int(at_step.sum()) > 0 and elsewhere == 0
+    return CaseResult("loss:ds", "", finite_out=True, passed=ok,
+                      note=f"E_d: {int(at_step.sum())} edge pixels at the step, {elsewhere} elsewhere "
+                           f"(e.g. along the NaN/inf blocks; expected > 0 and 0)")
+
+
+def _edge_cases(prior: np.ndarray, si: _SemInputs) -> list[Case]:
+    """The depth edge map E_d behind L_ds: none on flat, invalid or non-finite priors, some at real steps."""
+    cases: list[Case] = []
+    add = _adder(cases)
+    s_hat, s_tgt, has, full, empty, _ = si
 
     def edges_case(values, valid_m, expect_empty: bool, what: str) -> Callable[[], CaseResult]:
         def run() -> CaseResult:
@@ -155,25 +213,18 @@ def loss_cases() -> list[Case]:
     add("loss:ds", "edges of a constant prior", edges_case(np.full((24, 32), 5.0), full, True, "a constant prior"))
     add("loss:ds", "edges of an all-invalid prior", edges_case(prior, empty, True, "an all-invalid prior"))
     add("loss:ds", "edges of an all-NaN prior", edges_case(np.full((24, 32), np.nan), full, True, "an all-NaN prior"))
-
-    def nonfinite_blocks() -> CaseResult:
-        """NaN / inf blocks count as invalid: edges only at the real depth step, none along the blocks."""
-        yy, xx = np.mgrid[0:24, 0:32]
-        p = 1.0 + 0.01 * xx + 0.005 * yy + (xx >= 16) * 1.0      # noise-free ramp with one step at x = 16
-        p[:8, :8] = np.nan
-        p[16:, 4:12] = np.inf
-        e = depth_edges(p, full)
-        at_step = e & (np.abs(xx - 15.5) <= 3)
-        elsewhere = int((e & ~at_step).sum())
-        ok = e.dtype == bool and int(at_step.sum()) > 0 and elsewhere == 0
-        return CaseResult("loss:ds", "", finite_out=True, passed=ok,
-                          note=f"E_d: {int(at_step.sum())} edge pixels at the step, {elsewhere} elsewhere "
-                               f"(e.g. along the NaN/inf blocks; expected > 0 and 0)")
-
-    add("loss:ds", "edges of a prior with NaN/inf blocks", nonfinite_blocks)
+    add("loss:ds", "edges of a prior with NaN/inf blocks", lambda: _nonfinite_blocks_case(full))
     add("loss:ds", "edges of a prior with a step", edges_case(prior, full, False, "a prior with a depth step"))
     add("loss:ds", "edges of a 1e6 prior with a step", edges_case(prior * 1e6 + 1e6, full, False, "a 1e6 prior"))
     return cases
+
+
+def loss_cases() -> list[Case]:
+    """Each training loss in float32 vs float64 on regular and extreme inputs (gradients included)."""
+    depth, prior = _depth_pair()   # one pair shared by the depth, tv and edge cases
+    si = _sem_inputs()
+    return (_rec_loss_cases() + _depth_loss_cases(depth, prior) + _tv_loss_cases(depth) + _sem_ds_loss_cases(si)
+            + _edge_cases(prior, si))
 
 
 # ---------------------------------------------------------------------------- stiff loss weights

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 import torch
@@ -51,104 +51,24 @@ class GaussianDS(Method):
         self.info["priors_stats"] = dict(pri.stats)
         self.info["priors_skipped"] = dict(pri.skipped)
 
-        ckpt = resume
-        # ---- semantics: autoencoder (trained once, frozen; restored on resume) and per-pixel targets
         targets = None
         d = int(g["latent_dim"]) if use["semantics"] else 0
         if use["semantics"]:
-            if pri.masks is None or pri.mask_features is None:
-                raise ValueError(f"gaussiands: semantic losses are on but the priors gave no masks/features "
-                                 f"({pri.skipped})")
-            ae_state = (ckpt or {}).get("extra", {}).get("autoencoder")
-            self.autoencoder, self.info["autoencoder"], targets = semantic_targets(
-                pri.masks, pri.mask_features, g["autoencoder"], d, int(config["seed"]), ae_state,
-                {v: (W, H) for v in train_ids}, dev, data_on(config))
+            targets = self._semantic_targets(pri, config, d, resume, {v: (W, H) for v in train_ids}, dev)
         # ---- depth prior and its edges E_d (invariant to the per-iteration affine alignment, see losses.py)
         depth = pri.depth if use["depth_prior"] else None
         edges = {}
         if use["depth_prior"] and depth is None:
             raise ValueError(f"gaussiands: depth terms are on but the priors gave no depth ({pri.skipped})")
         if g["losses"]["ds"] and depth is not None:
-            e = g["edges"]
-            edges_np = {v: depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"],
-                                       int(e["dilate"]), e.get("size")) for v in train_ids}
-            share, n_empty = edge_coverage(edges_np)
-            self.info["edge_fraction"], self.info["edge_views_empty"] = share, n_empty
-            if n_empty:
-                # not an error (a smooth prior can have no edges), but never silent: L_ds then does nothing
-                log.warning("L_ds: the depth-edge map E_d (Canny %s/%s on the depth prior) covers %.3f %% of the "
-                            "pixels; %d of %d views are below %.1f %%, where L_ds acts on almost nothing "
-                            "(docs/methods.md, 'When E_d is empty')", e["canny_low"], e["canny_high"], 100 * share,
-                            n_empty, len(edges_np), 100 * EDGE_FLOOR)
-            edges = place({v: torch.as_tensor(x) for v, x in edges_np.items()}, dev, data_on(config))
-        # the depth prior on the device once (or on the host: train.data_on): values (float32), validity
-        # (finite and valid), its kind
-        dprior = {}
-        if depth is not None:
-            for v in train_ids:
-                vals = torch.as_tensor(np.asarray(depth[v].values, dtype=np.float32))
-                ok = torch.as_tensor(np.asarray(depth[v].valid, dtype=bool)) & torch.isfinite(vals)
-                dprior[v] = (torch.nan_to_num(vals, nan=0.0, posinf=0.0, neginf=0.0), ok, depth[v].kind)
-            dprior = place(dprior, dev, data_on(config))
+            edges = self._depth_edges(depth, g["edges"], train_ids, dev, config)
+        dprior = _device_depth_prior(depth, train_ids, dev, config)
         has_any = {v: bool(targets.has_target[v].any()) for v in train_ids} if targets is not None else {}
         # the host copies of the priors are no longer needed: the targets, dprior and edges hold what training
         # reads (at 1440x1080 the masks and depth maps of 175 views are about 2.5 GB)
         del pri, depth
 
-        lam = g["lambdas"]
-        on = g["losses"]
-        lam_dssim = float(config["train"]["lambda_dssim"])
-        form = g["depth_formulation"]
-        min_valid = int(g["min_valid_pixels"])
-        tv_eps = float(g["tv_eps"])
-        ds_average = str(setting(config, "gaussiands.ds_average"))
-
-        def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
-            # every value stays on the device: no host synchronisation per step (the trainer reads
-            # terms, weighted terms and skip counts at log steps only)
-            rec = reconstruction_loss(out.rgb, gt, lam_dssim)
-            total = rec
-            terms = {"rec": rec.detach()}
-            weighted = {"rec": rec.detach()}
-            skipped = {}
-            if (on["depth"] and dprior) or on["tv"]:
-                dn = normalised_depth(out.depth, out.alpha)     # scale-free: lambdas mean the same on every scene
-            if on["depth"] and dprior:
-                vals, valid, kind = dprior[vid]
-                # the prior is compared with the depth of the covered part (D / alpha), never with D:
-                # 1 / D confounds coverage with depth (losses.expected_depth)
-                dt = depth_loss(form, expected_depth(dn, out.alpha), vals, valid, kind, min_valid)
-                if dt.loss is not None:
-                    w = float(lam["depth"]) * dt.loss
-                    total = total + w
-                    terms["depth"], weighted["depth"] = dt.loss.detach(), w.detach()
-                    skipped["depth"] = (~dt.ok).long()
-            if on["tv"]:
-                tv = tv_loss(dn, tv_eps)
-                w = float(lam["tv"]) * tv
-                total = total + w
-                terms["tv"], weighted["tv"] = tv.detach(), w.detach()
-            if targets is not None and out.features is not None:
-                S, has = targets.latents[vid], targets.has_target[vid]
-                if on["sem"]:
-                    if not has_any[vid]:
-                        skipped["sem"] = 1
-                    else:
-                        ls = sem_loss(out.features, S, has)
-                        w = float(lam["sem"]) * ls
-                        total = total + w
-                        terms["sem"], weighted["sem"] = ls.detach(), w.detach()
-                if on["ds"] and vid in edges:
-                    if not has_any[vid]:
-                        skipped["ds"] = 1
-                    else:
-                        ld = ds_loss(out.features, S, has, edges[vid], ds_average)
-                        w = float(lam["ds"]) * ld
-                        total = total + w
-                        terms["ds"], weighted["ds"] = ld.detach(), w.detach()
-            terms["total"] = total.detach()
-            return LossResult(total, terms, skipped, weighted)
-
+        loss_fn = gaussiands_loss(config, dprior, targets, has_any, edges)
         extra = (lambda: {"autoencoder": self.autoencoder.state_dict()}) if self.autoencoder is not None else None
         field0, how = scene_init(scene, config, d)
         self.info["init"] = how
@@ -157,3 +77,105 @@ class GaussianDS(Method):
         self.info["n_gaussians"] = self.field.num
         self.info["device"] = str(dev)
         self.info["budget"] = budget(config)   # one joint phase: every step is appearance and semantics
+
+    def _semantic_targets(self, pri, config: dict, d: int, resume: Optional[dict], sizes: dict, dev):
+        """The autoencoder (trained once, frozen; restored from the checkpoint on resume) and the per-pixel
+        latent targets it makes of the priors' masks and mask features."""
+        if pri.masks is None or pri.mask_features is None:
+            raise ValueError(f"gaussiands: semantic losses are on but the priors gave no masks/features "
+                             f"({pri.skipped})")
+        ae_state = (resume or {}).get("extra", {}).get("autoencoder")
+        self.autoencoder, self.info["autoencoder"], targets = semantic_targets(
+            pri.masks, pri.mask_features, config["gaussiands"]["autoencoder"], d, int(config["seed"]), ae_state,
+            sizes, dev, data_on(config))
+        return targets
+
+    def _depth_edges(self, depth: dict, e: dict, train_ids: list[int], dev, config: dict) -> dict:
+        """The depth prior's edge map E_d per view (what L_ds acts on), placed for training; its coverage is
+        recorded, and a map that covers almost nothing is warned about."""
+        edges_np = {v: depth_edges(depth[v].values, depth[v].valid, e["canny_low"], e["canny_high"],
+                                   int(e["dilate"]), e.get("size")) for v in train_ids}
+        share, n_empty = edge_coverage(edges_np)
+        self.info["edge_fraction"], self.info["edge_views_empty"] = share, n_empty
+        if n_empty:
+            # not an error (a smooth prior can have no edges), but never silent: L_ds then does nothing
+            log.warning("L_ds: the depth-edge map E_d (Canny %s/%s on the depth prior) covers %.3f %% of the "
+                        "pixels; %d of %d views are below %.1f %%, where L_ds acts on almost nothing "
+                        "(docs/methods.md, 'When E_d is empty')", e["canny_low"], e["canny_high"], 100 * share,
+                        n_empty, len(edges_np), 100 * EDGE_FLOOR)
+        return place({v: torch.as_tensor(x) for v, x in edges_np.items()}, dev, data_on(config))
+
+
+def _device_depth_prior(depth: Optional[dict], train_ids: list[int], dev, config: dict) -> dict:
+    """The depth prior on the device once (or on the host: train.data_on), per view: values (float32, non-finite
+    zeroed), validity (valid and finite), its kind. Empty without a depth prior."""
+    dprior = {}
+    if depth is not None:
+        for v in train_ids:
+            vals = torch.as_tensor(np.asarray(depth[v].values, dtype=np.float32))
+            ok = torch.as_tensor(np.asarray(depth[v].valid, dtype=bool)) & torch.isfinite(vals)
+            dprior[v] = (torch.nan_to_num(vals, nan=0.0, posinf=0.0, neginf=0.0), ok, depth[v].kind)
+        dprior = place(dprior, dev, data_on(config))
+    return dprior
+
+
+def gaussiands_loss(config: dict, dprior: dict, targets, has_any: dict[int, bool],
+                    edges: dict) -> Callable[[int, Any, torch.Tensor], LossResult]:
+    """The per-step loss L = L_rec + the switched-on weighted terms (module docstring), as the trainer calls
+    it: (view id, render output, ground-truth image) -> LossResult."""
+    g = config["gaussiands"]
+    lam = g["lambdas"]
+    on = g["losses"]
+    lam_dssim = float(config["train"]["lambda_dssim"])
+    form = g["depth_formulation"]
+    min_valid = int(g["min_valid_pixels"])
+    tv_eps = float(g["tv_eps"])
+    ds_average = str(setting(config, "gaussiands.ds_average"))
+
+    def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
+        # every value stays on the device: no host synchronisation per step (the trainer reads
+        # terms, weighted terms and skip counts at log steps only)
+        rec = reconstruction_loss(out.rgb, gt, lam_dssim)
+        total = rec
+        terms = {"rec": rec.detach()}
+        weighted = {"rec": rec.detach()}
+        skipped = {}
+        if (on["depth"] and dprior) or on["tv"]:
+            dn = normalised_depth(out.depth, out.alpha)     # scale-free: lambdas mean the same on every scene
+        if on["depth"] and dprior:
+            vals, valid, kind = dprior[vid]
+            # the prior is compared with the depth of the covered part (D / alpha), never with D:
+            # 1 / D confounds coverage with depth (losses.expected_depth)
+            dt = depth_loss(form, expected_depth(dn, out.alpha), vals, valid, kind, min_valid)
+            if dt.loss is not None:
+                w = float(lam["depth"]) * dt.loss
+                total = total + w
+                terms["depth"], weighted["depth"] = dt.loss.detach(), w.detach()
+                skipped["depth"] = (~dt.ok).long()
+        if on["tv"]:
+            tv = tv_loss(dn, tv_eps)
+            w = float(lam["tv"]) * tv
+            total = total + w
+            terms["tv"], weighted["tv"] = tv.detach(), w.detach()
+        if targets is not None and out.features is not None:
+            S, has = targets.latents[vid], targets.has_target[vid]
+            if on["sem"]:
+                if not has_any[vid]:
+                    skipped["sem"] = 1
+                else:
+                    ls = sem_loss(out.features, S, has)
+                    w = float(lam["sem"]) * ls
+                    total = total + w
+                    terms["sem"], weighted["sem"] = ls.detach(), w.detach()
+            if on["ds"] and vid in edges:
+                if not has_any[vid]:
+                    skipped["ds"] = 1
+                else:
+                    ld = ds_loss(out.features, S, has, edges[vid], ds_average)
+                    w = float(lam["ds"]) * ld
+                    total = total + w
+                    terms["ds"], weighted["ds"] = ld.detach(), w.detach()
+        terms["total"] = total.detach()
+        return LossResult(total, terms, skipped, weighted)
+
+    return loss_fn

@@ -3,7 +3,7 @@ section with its section, table or figure, the compared rows and the paper's val
 latent-dimension table the dose figure marks (LATENT_DIM_MIOU).
 
 Why beside the method: whoever changes GaussianDS sees what it is measured against; the report
-(reports/claims.py) reads this table, sizes each claim against `paper` and gives the verdict. Row and
+(reports/claims_table.py) reads this table, sizes each claim against `paper` and gives the verdict. Row and
 reference selectors use the collected column names: `axis.<config key>` for a grid axis, `method`.
 Each number is the paper's as printed: a difference of two printed values is rounded to their decimals
 (`_gap`), and `Claim.paper_decimals` carries them, so verdicts and printed text use the paper's precision.
@@ -44,7 +44,7 @@ class Claim:
     reference: dict = field(default_factory=dict)  # axis -> value of the row it is compared with
     correlation: str | None = None                 # lambda axis: Pearson r with the metric instead
     # metric -> floor: what the compared row's runs must have been given for the study to see the mechanism
-    # (the mean over its runs); below it an absent effect reads 'blind' (reports/claims.py)
+    # (the mean over its runs); below it an absent effect reads 'blind' (reports/claims_table.py)
     inputs: dict = field(default_factory=dict)
     paper_decimals: int = PAPER_DECIMALS           # decimals the paper prints `paper` with
 

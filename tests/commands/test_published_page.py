@@ -12,7 +12,7 @@ import pytest
 from paths import REPO_ROOT
 
 from gsbench.cli import main
-from gsbench.grids.claims import plan_grids
+from gsbench.grids.claims_plan import plan_grids
 from gsbench.grids.store import Published, classify, read_store
 from gsbench.reports.claims_page import README_BEGIN, README_END, build_page, check_page, figure_folder, write_page
 

@@ -23,7 +23,7 @@ ALLOWED: set[tuple[str, str]] = {
     ("gsbench/priors/pipeline.py", "per_track"), ("methods/semantic.py", "epochs"), ("methods/semantic.py", "lr"),
     ("methods/base.py", "random_scale"), ("methods/semantic.py", "hidden"), ("gsbench/priors/masks.py", "generator"),
     # not config sections: a scene's gsbench_scene.json, a grid file's scene entry, a doctor report row
-    ("datasets/loader.py", "generator"), ("gsbench/grids/spec.py", "seed"),
+    ("datasets/loader.py", "generator"), ("gsbench/grids/grid_file.py", "seed"),
     ("gsbench/commands/doctor.py", "backend"), ("gsbench/commands/doctor.py", "device"),
 }
 

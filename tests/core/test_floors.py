@@ -5,7 +5,8 @@ Every import statement of the package is read with `ast`, those inside functions
 datasets/, metrics/ and reports/ are read as gsbench.methods, gsbench.datasets, gsbench.metrics and
 gsbench.reports (pyproject.toml [tool.setuptools] package-dir). Importing `a.b.c` also runs the
 packages `a.b` and `a`, so those count as imported too. A function-level import of a gsbench module
-must say why it is not at the top of its file, on its own line: `# lazy: <reason>`.
+must say why it is not at the top of its file, on its own line: `# lazy: <reason>`; there are at most
+MAX_LAZY_IMPORTS of them. No two parts of gsbench (subpackages, top-level modules) import each other.
 """
 from __future__ import annotations
 
@@ -46,6 +47,8 @@ FLOORS: dict[str, int] = {
     "gsbench.rundir": 0,           # the run folder's file names, status reader beside its writer
     "gsbench.metric_table": 0,     # every metric name and how it is shown
     "gsbench.studies": 0,          # the one table of studies (axes, labels, reference rows)
+    "gsbench.preview_files": 0,    # the previews folder of a run: manifest and arrays, writer and reader
+    "gsbench.step_timers": 0,      # wall-time totals of a training step's parts (benchmarks/train_speed.py)
     # 1: what a method is built from
     "gsbench.render": 1,
     "gsbench.priors": 1,
@@ -53,6 +56,7 @@ FLOORS: dict[str, int] = {
     "gsbench.datasets": 1,
     # 2
     "gsbench.methods": 2,
+    "gsbench.trained_run": 2,      # load_run: a finished run folder read back (evaluation reads it)
     # 3: what runs and scores methods
     "gsbench.evaluation": 3,
     "gsbench.runs": 3,
@@ -175,6 +179,67 @@ def upward(found: list[Import]) -> list[tuple[Import, str]]:
     return [(imp, t) for imp in found for t in _imported(imp.target) if floor(t) > floor(imp.source)]
 
 
+def part_of(module: str) -> str:
+    """The part of gsbench a module belongs to: its subpackage (gsbench.grids.store -> gsbench.grids)
+    or, for a top-level module, the module itself (gsbench.config)."""
+    return ".".join(module.split(".")[:2])
+
+
+def package_edges(found: list[Import]) -> dict[tuple[str, str], Import]:
+    """{(package, package it imports): the first import that makes the edge}, imports inside functions
+    and the packages an import runs included, the root package `gsbench` left out (every import runs it)."""
+    edges: dict[tuple[str, str], Import] = {}
+    for imp in found:
+        for t in _imported(imp.target):
+            a, b = part_of(imp.source), part_of(t)
+            if a != b and "gsbench" not in (a, b):
+                edges.setdefault((a, b), imp)
+    return edges
+
+
+def package_cycles(edges: dict[tuple[str, str], Import]) -> list[list[str]]:
+    """One cycle [a, b, ..., a] through each group of packages that import each other (a package
+    reaches another and is reached back)."""
+    succ: dict[str, set[str]] = {}
+    for a, b in edges:
+        succ.setdefault(a, set()).add(b)
+
+    def path(start: str, goal: str) -> list[str] | None:
+        """Shortest import path start -> ... -> goal (breadth first), None when goal is unreachable."""
+        came: dict[str, str] = {start: start}
+        todo = [start]
+        while todo:
+            nxt = []
+            for node in todo:
+                for b in sorted(succ.get(node, ())):
+                    if b == goal:
+                        out = [b, node]
+                        while out[-1] != start:
+                            out.append(came[out[-1]])
+                        return out[::-1]
+                    if b not in came:
+                        came[b] = node
+                        nxt.append(b)
+            todo = nxt
+        return None
+
+    cycles, seen = [], set()
+    for node in sorted(succ):
+        if node in seen:
+            continue
+        cycle = path(node, node)
+        if cycle:
+            seen.update(cycle)
+            cycles.append(cycle)
+    return cycles
+
+
+def lazy_statements(found: list[Import], root: Path = ROOT) -> list[str]:
+    """Every function-level import statement of a gsbench module, once ("file:line"; a `from a import b,
+    c` of two submodules is one statement)."""
+    return sorted({f"{i.path.relative_to(root)}:{i.line}" for i in found if i.in_function})
+
+
 # ---------------------------------------------------------------------------- the checker itself
 def _tree(tmp_path: Path, files: dict[str, str]) -> Path:
     for rel, body in files.items():
@@ -215,6 +280,24 @@ def test_checker_sees_imports_in_functions_relative_and_import_module(tmp_path):
                    ("gsbench.config", "gsbench.reports.build"), ("gsbench.config", "gsbench.reports")}
 
 
+def test_checker_finds_a_package_cycle(tmp_path):
+    root = _tree(tmp_path, {
+        "gsbench/__init__.py": "",
+        "gsbench/config.py": "",
+        "gsbench/evaluation/__init__.py": "from gsbench.evaluation.run import evaluate\n",
+        "gsbench/evaluation/run.py": "def evaluate():\n    from gsbench.runs import load  # lazy: a cycle\n",
+        "gsbench/runs/__init__.py": "from gsbench.runs.training import train\nload = 1\n",
+        "gsbench/runs/training.py": "from gsbench.evaluation import evaluate\nfrom gsbench import config\ntrain = 1\n",
+    })
+    edges = package_edges(imports(root))
+    assert set(edges) == {("gsbench.evaluation", "gsbench.runs"), ("gsbench.runs", "gsbench.evaluation"),
+                          ("gsbench.runs", "gsbench.config")}
+    assert package_cycles(edges) == [["gsbench.evaluation", "gsbench.runs", "gsbench.evaluation"]]
+    del edges[("gsbench.evaluation", "gsbench.runs")]
+    assert package_cycles(edges) == []
+    assert lazy_statements(imports(root), root) == ["gsbench/evaluation/run.py:2"]
+
+
 def test_checker_reads_the_package_dir_mapping_from_pyproject():
     text = (ROOT / "pyproject.toml").read_text()
     for folder, package in PACKAGE_DIRS.items():
@@ -246,6 +329,31 @@ def test_every_function_level_import_says_why():
     new = sorted({f"{i.path.relative_to(ROOT)}:{i.line}: {i.source} imports {i.target} inside a function"
                   for i in bare})
     assert not new, "add '# lazy: <reason>' or move the import to the top:\n" + "\n".join(new)
+
+
+# At most this many function-level imports of gsbench modules (statements). Most are the commands'
+# heavy parts (reports, collect, stress) and optional backends; one whose module every command
+# already loads, or that no cycle or floor keeps down, belongs at the top of its file.
+MAX_LAZY_IMPORTS = 30
+
+
+def test_function_level_imports_stay_few():
+    lazy = lazy_statements(imports())
+    assert len(lazy) <= MAX_LAZY_IMPORTS, (f"{len(lazy)} function-level imports of gsbench modules (at most "
+                                           f"{MAX_LAZY_IMPORTS}); move one to the top of its file:\n"
+                                           + "\n".join(lazy))
+
+
+def test_no_two_packages_import_each_other():
+    """No cycle between the parts of gsbench (subpackages and top-level modules), imports inside
+    functions included: of two packages that need each other, the shared piece moves below both."""
+    edges = package_edges(imports())
+    found = []
+    for cycle in package_cycles(edges):
+        steps = [edges[(a, b)] for a, b in zip(cycle, cycle[1:])]
+        found.append(" -> ".join(cycle) + "\n" + "\n".join(
+            f"    {i.path.relative_to(ROOT)}:{i.line}: {i.source} imports {i.target}" for i in steps))
+    assert not found, "package import cycles:\n" + "\n".join(found)
 
 
 def test_the_ground_floor_loads_no_module_above_it():

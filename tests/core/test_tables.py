@@ -2,10 +2,10 @@
 grid's study is in the studies table with the axes it varies."""
 from __future__ import annotations
 
-from gsbench.grids.spec import GRID_DIR, load_grid
+from gsbench.grids.grid_file import GRID_DIR, load_grid
 from gsbench.metric_table import KNOWN_METRICS, METRICS
-from gsbench.reports.spec import STUDIES as REPORT_LABELS
-from gsbench.reports.spec import STUDY_REFERENCE, metric_spec
+from gsbench.reports.display import STUDIES as REPORT_LABELS
+from gsbench.reports.display import STUDY_REFERENCE, metric_spec
 from gsbench.studies import MAIN_STUDIES, STUDIES
 
 

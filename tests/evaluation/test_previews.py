@@ -1,4 +1,4 @@
-"""Pictures: what `gsbench eval` saves in a run folder (gsbench.previews, gsbench.evaluation.previews)
+"""Pictures: what `gsbench eval` saves in a run folder (gsbench.preview_files, gsbench.evaluation.previews)
 and how the report places them (gsbench.reports.pictures)."""
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 from previews_fake import MAGENTA, fake_previews
 
 from gsbench.errors import InputError
-from gsbench.previews import FRAME_ARRAYS, MANIFEST, PREVIEWS_DIR, read_arrays, read_manifest
+from gsbench.preview_files import FRAME_ARRAYS, MANIFEST, PREVIEWS_DIR, read_arrays, read_manifest
 
 
 # ------------------------------------------------------------------ the file contract

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from gsbench.grids.claims import CLAIM_GRIDS, CONTROL_GRIDS, plan_grids
+from gsbench.grids.claims_plan import CLAIM_GRIDS, CONTROL_GRIDS, plan_grids
 
 
 def test_quick_plan_is_the_same_cells_smaller():
@@ -30,7 +30,7 @@ def test_quick_plan_is_the_same_cells_smaller():
 # shipped quick sizes; this cuts the test from ~6 min to under a minute on 2 cores.
 _SMALLER_QUICK = """
 import sys
-import gsbench.grids.claims as c
+import gsbench.grids.claims_plan as c
 c.QUICK_SEEDS[:] = [0]
 c.QUICK_RESOLUTION[:] = [16, 12]
 c.QUICK_VIEWS = 4
@@ -42,7 +42,7 @@ sys.exit(main(sys.argv[1:]))
 
 @pytest.mark.slow
 def test_claims_quick_end_to_end():
-    from gsbench.reports.claims import PAPER_CLAIMS
+    from gsbench.reports.claims_table import PAPER_CLAIMS
     out = Path(tempfile.mkdtemp(prefix="gsbench-claims-quick-"))   # outside pytest's rotating basetemp
     try:
         cmd = [sys.executable, "-c", _SMALLER_QUICK, "claims", "--quick", "--executor", "serial", "--no-progress",

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from gsbench.datasets.loader import load_scene
 from gsbench.datasets.synthetic import make_scene
-from gsbench.grids.claims import plan_grids
-from gsbench.grids.spec import load_grid
+from gsbench.grids.claims_plan import plan_grids
+from gsbench.grids.grid_file import load_grid
 from gsbench.methods.losses import EDGE_FLOOR, depth_edges, edge_coverage
 from gsbench.priors.depth import compute_depth
 

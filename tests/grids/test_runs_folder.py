@@ -13,7 +13,7 @@ import pytest
 
 from gsbench import grids
 from gsbench.cli import main
-from gsbench.grids.claims import CLAIM_GRIDS
+from gsbench.grids.claims_plan import CLAIM_GRIDS
 from gsbench.grids.runs_folder import foreign_entries
 from gsbench.runlock import read_holder
 

@@ -167,7 +167,7 @@ def test_stale_cells_are_listed(published, tmp_path, monkeypatch, capsys):
 
 def test_claims_reuses_published_cells_without_training(published, tmp_path, monkeypatch, capsys):
     grid_file, runs, store = published
-    import gsbench.grids.claims as claims_plan
+    import gsbench.grids.claims_plan as claims_plan
     monkeypatch.setattr(claims_plan, "plan_grids", lambda quick=False, names=None: [grids.load_grid(grid_file)])
     trained: list[str] = []
     monkeypatch.setattr(grids.running, "_train_and_evaluate", lambda spec, run_dir, status: trained.append(run_dir))

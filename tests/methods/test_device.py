@@ -6,7 +6,7 @@ from tiny import device_run_overrides
 
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
-from gsbench.methods.device import resolve_backend_for
+from gsbench.methods.backend_choice import resolve_backend_for
 
 NO_CUDA = not torch.cuda.is_available()
 
@@ -35,10 +35,10 @@ def test_backend_for_cpu_device():
 
 
 def test_backend_for_cuda_device_without_gsplat_warns_once(monkeypatch, caplog):
-    import gsbench.methods.device as D
+    import gsbench.methods.backend_choice as D
     monkeypatch.setattr(D, "gsplat_available", lambda: False)
     cuda = torch.device("cuda", 0)            # resolution only: nothing is allocated
-    with caplog.at_level("WARNING", logger="gsbench.methods.device"):
+    with caplog.at_level("WARNING", logger="gsbench.methods.backend_choice"):
         assert resolve_backend_for("auto", cuda) == "torch"
     assert len(caplog.records) == 1 and "gsplat" in caplog.records[0].getMessage()
     with pytest.raises(InputError, match="CPU only"):

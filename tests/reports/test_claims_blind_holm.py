@@ -13,7 +13,15 @@ from report_runs import write_run
 from statsmodels.stats.multitest import multipletests
 
 from gsbench.collect import collect
-from gsbench.reports.claims import INCONCLUSIVE, PAPER_CLAIMS, REPRODUCED, SMALLER, claims_table, verdict, verdict_text
+from gsbench.reports.claims_table import (
+    INCONCLUSIVE,
+    PAPER_CLAIMS,
+    REPRODUCED,
+    SMALLER,
+    claims_table,
+    verdict,
+    verdict_text,
+)
 from gsbench.reports.controls import MARKED, NOT_RUN, OPPOSITE, UNMARKED, controls_table, mark_rows
 from gsbench.reports.data import Results
 from gsbench.reports.stats import compare

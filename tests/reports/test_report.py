@@ -295,8 +295,8 @@ def test_pareto_pearson_and_train_curve(tmp_path: Path):
 def test_lambda_slice_keeps_one_sweep(tmp_path: Path):
     """Two sweeps (depth x sem, tv x ds) around defaults: the depth x sem surface uses only the runs
     with tv and ds at their default (the most common value), never runs of the other sweep."""
+    from gsbench.reports.display import AX_LAMBDAS
     from gsbench.reports.plots import _lambda_slice
-    from gsbench.reports.spec import AX_LAMBDAS
     root = tmp_path / "runs"
     cells = {(d, 1.5, s, 1.0) for d in (0.001, 0.01, 0.1) for s in (1.0, 5.0)}
     cells |= {(0.01, t, 5.0, ds) for t in (0.5, 3.0) for ds in (0.25, 2.0)}

@@ -12,7 +12,7 @@ from gsbench.collect import collect
 from gsbench.config import config_key
 from gsbench.reports.ablations import loss_subsets_table, parse_dropped
 
-from gsbench.reports.claims import (INCONCLUSIVE, NOT_REPRODUCED, NOT_RUN, NOT_TESTABLE, OPPOSITE,  # isort: skip
+from gsbench.reports.claims_table import (INCONCLUSIVE, NOT_REPRODUCED, NOT_RUN, NOT_TESTABLE, OPPOSITE,  # isort: skip
                                     PAPER_CLAIMS, REPRODUCED, SMALLER, claims_table, verdict, verdict_text)
 from report_runs import write_run
 

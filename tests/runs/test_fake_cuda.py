@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import torch
 
-import gsbench.methods.device as D
+import gsbench.methods.backend_choice as D
 import gsbench.render.gsplat_ext as G
 from gsbench.config import load_config
 from gsbench.errors import InputError
@@ -72,7 +72,7 @@ def test_every_shipped_preset_is_listed_here():
 
 def test_every_shipped_grid_resolves_on_a_cuda_machine(fake_cuda, tmp_path):
     from gsbench.grids.planning import cell_config
-    from gsbench.grids.spec import load_grid, shipped_grids
+    from gsbench.grids.grid_file import load_grid, shipped_grids
     names = shipped_grids()
     assert "tiny-test" in names and any(n.endswith("-cpu") for n in names)
     for name in names:
@@ -160,7 +160,7 @@ def test_gsplat_without_extension_or_toolkit_is_not_picked(fake_cuda, fake_gspla
     st = G.gsplat_status()
     assert st.state == G.NO_TOOLKIT and st.version == "1.5.3" and not st.usable
     cuda = torch.device("cuda", 0)
-    with caplog.at_level("WARNING", logger="gsbench.methods.device"):
+    with caplog.at_level("WARNING", logger="gsbench.methods.backend_choice"):
         assert D.resolve_backend_for("auto", cuda) == "torch"
     assert "no CUDA toolkit" in caplog.text
     with pytest.raises(InputError, match="gsplat cannot render here"):

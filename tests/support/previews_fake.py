@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gsbench.previews import write_previews
+from gsbench.preview_files import write_previews
 
 MAGENTA = (255, 0, 255)
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional
 
+from gsbench.cli import main
 from gsbench.stress.core import Case, CaseResult
 
 MAX_LINE = 400          # an error line longer than this echoes the input instead of naming it
@@ -56,7 +57,6 @@ def _base_dir() -> Path:
 
 @functools.lru_cache(maxsize=None)
 def _tiny_scene() -> Path:
-    from gsbench.cli import main  # lazy: the CLI imports every command, stress among them
     out = _base_dir() / "scene"
     args = ["make-scene", "--preset", "tabletop-small", "--views", "8", "--resolution", "32x24", "--seed", "0"]
     if main([*args, "--out", str(out), "--quiet"]) != 0:
@@ -72,7 +72,6 @@ def tiny_scene(dest: Path) -> Path:
 
 @functools.lru_cache(maxsize=None)
 def _tiny_run(method: str) -> Path:
-    from gsbench.cli import main  # lazy: the CLI imports every command, stress among them
     out = _base_dir() / f"run_{method}"
     args = ["train", "--method", method, "--scene", str(_tiny_scene()), "--preset", "cpu-small", "--out", str(out),
             "--set", "train.iterations=2", "--set", "train.eval_every=0", "--set", "priors.masks.provider=gt",
@@ -131,7 +130,6 @@ def _judge(h: Hostile, folder: Path, argv: list[str], code: int, err: str) -> Op
 
 def run_hostile(h: Hostile) -> CaseResult:
     """Build the input in a fresh folder, run the command, judge what the user saw."""
-    from gsbench.cli import main  # lazy: the CLI imports every command, stress among them
     t0 = time.perf_counter()
     res = CaseResult(f"hostile:{h.area}", h.name)
     folder = Path(tempfile.mkdtemp(prefix="case-", dir=_base_dir()))

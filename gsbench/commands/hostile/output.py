@@ -16,8 +16,9 @@ import time
 from pathlib import Path
 from typing import Callable, Optional
 
+from gsbench.cli import main
 from gsbench.commands.hostile import Hostile, _base_dir, tiny_run
-from gsbench.grids.claims import CLAIM_GRIDS
+from gsbench.grids.claims_plan import CLAIM_GRIDS
 
 ME_JPG = b"\xff\xd8\xff\xe0 a holiday picture"
 THESIS = "\\section{Results} my own words\n"
@@ -26,7 +27,6 @@ THESIS = "\\section{Results} my own words\n"
 @functools.lru_cache(maxsize=None)
 def _evaluated_runs() -> Path:
     """A runs folder with one finished, evaluated tiny run: what `gsbench report` reads (read only)."""
-    from gsbench.cli import main  # lazy: the CLI imports every command, stress among them
     runs = _base_dir() / "output_runs"
     run = tiny_run(runs / "r1")
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
@@ -91,7 +91,6 @@ def _report_force_clash(folder: Path) -> list[str]:
 
 
 def _report_changed(folder: Path) -> list[str]:
-    from gsbench.cli import main  # lazy: the CLI imports every command, stress among them
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         if main(_report(folder / "P", "--quiet")) != 0:
             raise RuntimeError("could not write the first report")
@@ -147,7 +146,6 @@ def _make_scene_nonempty(folder: Path) -> list[str]:
 def _points_foreign(folder: Path) -> list[str]:
     """A scene at 96x72 (the tiny one's 32x24 has too few keypoints to triangulate) with a user's file
     in sparse/0, whose points `points --force` replaces."""
-    from gsbench.cli import main  # lazy: the CLI imports every command, stress among them
     scene = folder / "scene"
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         if main(["make-scene", "--preset", "tabletop-small", "--views", "8", "--resolution", "96x72", "--out",
