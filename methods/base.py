@@ -35,14 +35,13 @@ from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
 from gsbench.methods.autoencoder import FeatureAutoencoder
-from gsbench.methods.backend_choice import prepare_backend, resolve_backend_for
-from gsbench.methods.common import resolve_render_backend
+from gsbench.methods.common import prepare_backend, resolve_render_backend
 from gsbench.methods.feature_blocks import FeatureBlocks
 from gsbench.methods.registry import get_method
 from gsbench.methods.residency import DEVICE, data_on, place
 from gsbench.methods.trainer import Trainer, TrainViews, init_field
 from gsbench.priors import get_feature_provider
-from gsbench.render import RenderOutput, render
+from gsbench.render import RenderOutput, render, resolve_backend
 from gsbench.resize import resize_rgb
 from gsbench.store import load_torch, save_torch_atomic
 
@@ -223,9 +222,9 @@ class Method:
         m.providers = st.get("providers", m.providers)
         saved = st.get("backend", "torch")
         try:
-            m._backend = resolve_backend_for(saved, dev)
+            m._backend = resolve_backend(saved, dev)
         except InputError:
-            m._backend = resolve_backend_for("auto", dev)
+            m._backend = resolve_backend("auto", dev)
             logging.getLogger(__name__).info("%s: saved backend %s cannot render on %s; using %s",
                                              path, saved, dev, m._backend)
         prepare_backend(m._backend)

@@ -4,7 +4,10 @@ All image tensors are (H, W, C) or (H, W). Every division, sqrt and normalisatio
 On the CPU, expected depth, scale_shift depth_loss, tv, sem and ds run `losses_cpu` (numba).
 
 - `ssim`: differentiable SSIM (Gaussian window 11, sigma 1.5, zero padding as in 3DGS), mean over pixels/channels;
-  on the CPU computed by `ssim_cpu` (numba, hand-written backward), elsewhere by `ssim_map`.
+  on the CPU computed by `ssim_cpu` (numba, hand-written backward), elsewhere by `ssim_map`. Its constants are
+  the one SSIM definition, gsbench/metrics/ssim_definition.py (the evaluation metric's too); the window's taps
+  are computed here with torch, not taken from the metric's numpy `gaussian_window`, because the two exp
+  implementations can differ in the last bit and these taps are the training numbers (tests check they agree).
 - `reconstruction_loss`: L_rec = (1 - lambda) L1 + lambda (1 - SSIM).
 - `solve_scale_shift`: closed-form least squares s, t with s * prior + t ~ target, in float64 on centred,
   magnitude-normalised data, no gradient; returns ok=False (the caller skips and counts) when the prior is
@@ -40,13 +43,12 @@ import torch.nn.functional as F
 
 from gsbench.methods import losses_cpu as LC
 from gsbench.methods.ssim_cpu import ssim_mean_cpu
+from gsbench.metrics.ssim_definition import SSIM_C1, SSIM_C2, SSIM_SIGMA, SSIM_TRAIN_DEN_FLOOR, SSIM_WINDOW
 
 DEPTH_FORMULATIONS = ("none", "raw_l1", "minmax", "scale_shift", "pearson")
 DEPTH_EPS = 1e-6          # rendered depth below this is "no surface" (not inverted, not used)
 ALPHA_EPS = 1e-3          # accumulated alpha below this is "not covered" (1 - T in float32 is exact to ~1e-7)
 CONSTANT_REL_EPS = 1e-9   # prior whose std is below this fraction of its magnitude is "constant"
-SSIM_C1 = 0.01 ** 2
-SSIM_C2 = 0.03 ** 2
 #: False forces the PyTorch code below (the reference that tests compare `losses_cpu` with)
 CPU_KERNELS = True
 
@@ -88,7 +90,8 @@ def _blur(x: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
     return F.conv2d(x, g.reshape(1, 1, k, 1).expand(c, 1, k, 1), padding=(pad, 0), groups=c)
 
 
-def ssim(img1: torch.Tensor, img2: torch.Tensor, window_size: int = 11, sigma: float = 1.5) -> torch.Tensor:
+def ssim(img1: torch.Tensor, img2: torch.Tensor, window_size: int = SSIM_WINDOW,
+         sigma: float = SSIM_SIGMA) -> torch.Tensor:
     """Mean SSIM of two (H, W, C) images in [0, 1]; differentiable (training loss, not the metric).
 
     Non-empty CPU images of one float dtype take `ssim_cpu` (the same function: numba, with a
@@ -102,7 +105,8 @@ def ssim(img1: torch.Tensor, img2: torch.Tensor, window_size: int = 11, sigma: f
     return ssim_map(img1, img2, window_size, sigma).mean()
 
 
-def ssim_map(img1: torch.Tensor, img2: torch.Tensor, window_size: int = 11, sigma: float = 1.5) -> torch.Tensor:
+def ssim_map(img1: torch.Tensor, img2: torch.Tensor, window_size: int = SSIM_WINDOW,
+             sigma: float = SSIM_SIGMA) -> torch.Tensor:
     """Per-pixel SSIM (1, C, H, W) with zero padding ('same' size, as the 3DGS training loss)."""
     if img1.shape != img2.shape:
         raise ValueError(f"ssim: shapes differ {tuple(img1.shape)} vs {tuple(img2.shape)}")
@@ -118,7 +122,7 @@ def ssim_map(img1: torch.Tensor, img2: torch.Tensor, window_size: int = 11, sigm
     s1, s2, s12 = e11 - mu1_sq, e22 - mu2_sq, e12 - mu12
     num = (2 * mu12 + SSIM_C1) * (2 * s12 + SSIM_C2)
     den = (mu1_sq + mu2_sq + SSIM_C1) * (s1 + s2 + SSIM_C2)   # >= C1 * C2 > 0 up to rounding
-    return num / den.clamp_min(1e-12)
+    return num / den.clamp_min(SSIM_TRAIN_DEN_FLOOR)
 
 
 def l1(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:

@@ -1,7 +1,8 @@
 """The SSIM training loss on the CPU: a numba forward and a hand-written backward.
 
 `losses.ssim` runs this for CPU tensors; it is the same function as `losses.ssim_map(...).mean()`
-(Gaussian window, zero padding, 3DGS's constants): the blurs in the images' dtype as the PyTorch
+(Gaussian window, zero padding, 3DGS's constants: the one SSIM definition, gsbench/metrics/ssim_definition.py,
+whose window taps and C1, C2 `losses.ssim` passes in): the blurs in the images' dtype as the PyTorch
 version computes them, the per-pixel SSIM, its derivatives and the sum in float64, the result in the
 images' dtype. The PyTorch version spends most of its time in two grouped convolutions and their backward
 (about 11 ms per 256x192 RGB step on 2 cores); here each of the five local statistics of a channel
@@ -18,10 +19,11 @@ import numpy as np
 import torch
 from numba import njit, prange
 
+from gsbench.metrics.ssim_definition import SSIM_TRAIN_DEN_FLOOR
 from gsbench.render.cpu_backend import set_numba_threads
 
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
-CLAMP = 1e-12            # the denominator's floor, as in `losses.ssim_map`
+CLAMP = SSIM_TRAIN_DEN_FLOOR     # the denominator's floor, as in `losses.ssim_map`
 
 
 @njit(inline="always", **_OPTS)

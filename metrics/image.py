@@ -20,6 +20,12 @@ population (not sample) covariances, mean over the map and the channels. Border 
             reflection and then crops 5 px), so it agrees with
             skimage.metrics.structural_similarity(gaussian_weights=True, sigma=1.5,
             use_sample_covariance=False, data_range=1) to floating-point precision.
+The constants are the one SSIM definition (metrics/ssim_definition.py), shared with the training loss
+(methods/losses.py, methods/ssim_cpu.py); its "zeropad" map is the training form's to float tolerance
+(tests/metrics/test_metrics_image.py). It stays a separate code path because an evaluation number is
+computed in float64 from clipped images (with the "valid" border as a second convention, and a
+denominator floor of 1e-20 instead of the training forms' 1e-12), while the training forms work in
+the images' dtype on their device with gradients.
 """
 from __future__ import annotations
 
@@ -32,13 +38,10 @@ import numpy as np
 from gsbench.errors import InputError
 
 from ._common import as_mask, finite_float, same_shape
+from .ssim_definition import SSIM_BORDERS, SSIM_C1, SSIM_C2, SSIM_SIGMA, SSIM_WINDOW, SSIM_ZEROPAD
 
-SSIM_WINDOW = 11
-SSIM_SIGMA = 1.5
-SSIM_K1 = 0.01
-SSIM_K2 = 0.03
-SSIM_BORDERS = ("zeropad", "valid")
-SSIM_DEFAULT_BORDER = "zeropad"   # the 3DGS form: what 3DGS-family papers report
+SSIM_DEFAULT_BORDER = SSIM_ZEROPAD   # the 3DGS form: what 3DGS-family papers report
+SSIM_DEN_FLOOR = 1e-20               # float64 evaluation: far below C1 C2, never hit with the constants
 PSNR_MSE_FLOOR = 1e-10  # caps PSNR at 100 dB for identical images
 
 PSNR_IMPL = {True: "psnr/uint8-round/v1", False: "psnr/float/v1"}
@@ -112,8 +115,7 @@ def ssim_map(pred: Any, gt: Any, *, border: str = SSIM_DEFAULT_BORDER) -> np.nda
         raise InputError(f"ssim (valid border) needs images of at least {SSIM_WINDOW}x{SSIM_WINDOW}, got {w}x{h}")
     g = gaussian_window()
     r = SSIM_WINDOW // 2
-    c1 = (SSIM_K1 * 1.0) ** 2
-    c2 = (SSIM_K2 * 1.0) ** 2
+    c1, c2 = SSIM_C1, SSIM_C2
     out = []
     for ch in range(c):
         x = np.ascontiguousarray(a[..., ch])
@@ -124,7 +126,7 @@ def ssim_map(pred: Any, gt: Any, *, border: str = SSIM_DEFAULT_BORDER) -> np.nda
         sxy = _filter(x * y, g, border) - mx * my
         num = (2 * mx * my + c1) * (2 * sxy + c2)
         den = (mx * mx + my * my + c1) * (sxx + syy + c2)  # >= c1 * c2 > 0 up to rounding
-        m = num / np.maximum(den, 1e-20)
+        m = num / np.maximum(den, SSIM_DEN_FLOOR)
         if border == "valid":
             m = m[r:h - r, r:w - r]
         out.append(m)

@@ -3,7 +3,7 @@
 Prints torch and its CUDA build, the CUDA devices torch sees, gsplat with the state of its CUDA
 extension (found from the files, never compiled here unless --build-gsplat asks), numba and the
 `cpu` backend, and the device and render backend that each shipped preset resolves to with
-`train.device: auto` (gsbench.methods.backend_choice: the same code training uses).
+`train.device: auto` (gsbench.render.resolve_backend: the same rule training uses).
 """
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ import platform
 from gsbench.config import load_config
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
-from gsbench.methods.backend_choice import resolve_backend_for
+from gsbench.render import resolve_backend
 from gsbench.render.gsplat_ext import NEEDS_BUILD, build_gsplat_extension, gsplat_status
 
-PRESETS = ("default", "cpu-small", "cpu-medium", "paper")
+PRESETS = ("default", "cpu-small", "cpu-medium", "cpu-real", "paper")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -74,7 +74,7 @@ def _auto_lines() -> list[str]:
         want = f"train.device={cfg['train'].get('device', 'auto')}, backend={cfg.get('backend', 'auto')}"
         try:
             dev = resolve_device(cfg)
-            got = f"{dev}, backend {resolve_backend_for(cfg.get('backend', 'auto'), dev)}"
+            got = f"{dev}, backend {resolve_backend(cfg.get('backend', 'auto'), dev)}"
         except InputError as e:
             got = f"error: {e}"
         lines.append(f"  {preset:<11} {want:<38} -> {got}")

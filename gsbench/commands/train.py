@@ -2,12 +2,20 @@
 from __future__ import annotations
 
 import argparse
+import logging
 from pathlib import Path
 
 from gsbench import rundir
 from gsbench.config import load_config, set_args
+from gsbench.datasets.loader import SYNTHETIC_META
 from gsbench.method_table import METHODS
 from gsbench.store import read_json
+
+log = logging.getLogger(__name__)
+
+#: presets whose schedules were tuned on the generated scenes, and the one tuned on real photos
+SYNTHETIC_PRESETS = ("cpu-small", "cpu-medium")
+REAL_PRESET = "cpu-real"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,10 +34,23 @@ def config_from_args(args: argparse.Namespace) -> dict:
     return load_config(args.method, args.preset, set_args(args.overrides))
 
 
+def preset_hint(preset: str | None, scene: Path) -> str | None:
+    """The line `gsbench train` logs when a preset tuned on generated scenes meets a real capture (a
+    scene folder without gsbench_scene.json): there it stops far short of convergence."""
+    if preset not in SYNTHETIC_PRESETS or not scene.is_dir() or (scene / SYNTHETIC_META).exists():
+        return None
+    return (f"--preset {preset} is tuned for gsbench's generated scenes; on a real capture like {scene} it "
+            f"stops well short of convergence: --preset {REAL_PRESET} converges on real photos on a CPU "
+            f"(docs/real-captures.md)")
+
+
 def run(args: argparse.Namespace) -> int:
     from gsbench.runs import train_run  # lazy: start-up (cli loads all commands)
 
     cfg = config_from_args(args)
+    hint = preset_hint(args.preset, Path(args.scene))
+    if hint:
+        log.warning(hint)
     out = train_run(cfg, Path(args.scene), Path(args.out), progress=not args.no_progress)
     s = read_json(out / rundir.TRAIN_SUMMARY)
     ev = s.get("last_eval") or {}

@@ -20,7 +20,7 @@ from gsbench.grids.grid_file import Grid
 from gsbench.grids.liveness import CELL_FILE, CELL_STATUS_FILE, HEARTBEAT_S, cell_state, read_cell_status
 from gsbench.grids.planning import PlannedCell, plan, write_manifest
 from gsbench.grids.priors_share import shared_priors
-from gsbench.methods.backend_choice import prebuild_for
+from gsbench.methods.common import prebuild_for
 from gsbench.runlock import RunLock, RunLockedError
 from gsbench.runs import train_run
 from gsbench.store import write_json_atomic

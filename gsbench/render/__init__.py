@@ -12,8 +12,10 @@ Backends:
   torch  - the reference (plain PyTorch, autograd, any device/dtype); gsbench/render/torch_backend.py
   cpu    - the fast CPU path (fused kernels, hand-written backward); gsbench/render/cpu_backend.py
   gsplat - CUDA through gsplat.rasterization (optional extra `cuda`)
-  auto   - gsplat on CUDA tensors, cpu otherwise
-The numerical rules all backends share are in gsbench/render/rules.py.
+  auto   - the device's backend: gsplat on CUDA tensors (torch, with a warning, where gsplat cannot
+           render), cpu otherwise
+Which backend renders on a device (`resolve_backend`, the one rule; the methods call it) is
+gsbench/render/backend_choice.py. The numerical rules all backends share are in gsbench/render/rules.py.
 """
 from __future__ import annotations
 
@@ -24,15 +26,13 @@ from typing import Callable, Optional
 import torch
 
 from gsbench.camera import Camera
-from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
+from gsbench.render.backend_choice import BACKENDS, resolve_backend
 from gsbench.render.projection import Projected, project_gaussians
 from gsbench.render.threads import select_numba_threading_layer
 from gsbench.render.torch_backend import rasterize_torch
 
 select_numba_threading_layer()    # before any numba kernel of the cpu backend runs (render/threads.py)
-
-BACKENDS = ("torch", "cpu", "gsplat")
 
 
 @dataclass
@@ -45,14 +45,6 @@ class RenderOutput:
     means2d: Optional[torch.Tensor] = None   # (N, 2) screen positions; .grad after backward (densification)
     radii: Optional[torch.Tensor] = None     # (N, 2) int screen half-extent, 0 where culled
     info: dict = dc_field(default_factory=dict)
-
-
-def resolve_backend(backend: str, device: torch.device) -> str:
-    if backend == "auto":
-        return "gsplat" if device.type == "cuda" else "cpu"
-    if backend not in BACKENDS:
-        raise InputError(f"unknown render backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
-    return backend
 
 
 def _rasterizer(name: str) -> Callable:
@@ -88,7 +80,8 @@ def render(field: GaussianField, camera: Camera, *, backend: str = "auto",
            background: Optional[torch.Tensor] = None) -> RenderOutput:
     """Render RGB, depth, features and alpha of `field` seen from `camera`."""
     device, dtype = field.means.device, field.means.dtype
-    name = resolve_backend(backend, device)
+    # a concrete name is trusted (the run resolved it once, up front); `auto` takes the device's backend
+    name = backend if backend in BACKENDS else resolve_backend(backend, device)
     if name == "gsplat":
         from gsbench.render.gsplat_backend import render_gsplat  # lazy: optional (gsplat)
         return render_gsplat(field, camera, background=background)

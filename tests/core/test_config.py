@@ -275,7 +275,7 @@ def test_every_rule_names_a_key_of_default_yaml_and_shipped_configs_pass():
     leaves = flatten(default_tree())
     assert set(config_keys.RULES) <= set(leaves)
     validate(default_tree())
-    for preset in ("cpu-small", "cpu-medium", "paper"):
+    for preset in ("cpu-small", "cpu-medium", "cpu-real", "paper"):
         for m in config_keys.METHODS:
             validate(load_config(m, preset))
     assert load_tree("cpu-small")["train"]["iterations"] == 500

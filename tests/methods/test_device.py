@@ -2,11 +2,12 @@
 auto picks the device's backend; CUDA runs skip cleanly without CUDA."""
 import pytest
 import torch
+from render_fields import look_at, random_field
 from tiny import device_run_overrides
 
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
-from gsbench.methods.backend_choice import resolve_backend_for
+from gsbench.render import resolve_backend
 
 NO_CUDA = not torch.cuda.is_available()
 
@@ -28,23 +29,40 @@ def test_cuda_without_cuda_is_an_error():
 
 def test_backend_for_cpu_device():
     cpu = torch.device("cpu")
-    assert resolve_backend_for("auto", cpu) == "cpu"
-    assert resolve_backend_for("torch", cpu) == "torch"
+    assert resolve_backend("auto", cpu) == "cpu"
+    assert resolve_backend("torch", cpu) == "torch"
     with pytest.raises(InputError, match="gsplat"):
-        resolve_backend_for("gsplat", cpu)
+        resolve_backend("gsplat", cpu)
 
 
 def test_backend_for_cuda_device_without_gsplat_warns_once(monkeypatch, caplog):
-    import gsbench.methods.backend_choice as D
+    import gsbench.render.backend_choice as D
     monkeypatch.setattr(D, "gsplat_available", lambda: False)
     cuda = torch.device("cuda", 0)            # resolution only: nothing is allocated
-    with caplog.at_level("WARNING", logger="gsbench.methods.backend_choice"):
-        assert resolve_backend_for("auto", cuda) == "torch"
+    with caplog.at_level("WARNING", logger="gsbench.render.backend_choice"):
+        assert resolve_backend("auto", cuda) == "torch"
     assert len(caplog.records) == 1 and "gsplat" in caplog.records[0].getMessage()
     with pytest.raises(InputError, match="CPU only"):
-        resolve_backend_for("cpu", cuda)
+        resolve_backend("cpu", cuda)
     monkeypatch.setattr(D, "gsplat_available", lambda: True)
-    assert resolve_backend_for("auto", cuda) == "gsplat"
+    assert resolve_backend("auto", cuda) == "gsplat"
+
+
+def test_methods_and_render_take_the_one_backend_rule(monkeypatch):
+    """A config's backend (methods/common.py) and render()'s `auto` are gsbench.render's rule, not copies."""
+    import gsbench.render.backend_choice as D
+    from gsbench.config import load_config
+    from gsbench.methods.common import resolve_render_backend
+    from gsbench.render import render
+    cfg = load_config("vanilla", None, [])
+    cuda = torch.device("cuda", 0)            # resolution only: nothing is allocated
+    for usable, want in ((False, "torch"), (True, "gsplat")):
+        monkeypatch.setattr(D, "gsplat_available", lambda u=usable: u)
+        assert resolve_render_backend(cfg, cuda) == D.resolve_backend("auto", cuda) == want
+    assert resolve_render_backend(cfg, torch.device("cpu")) == "cpu"
+    with pytest.raises(InputError, match="gsplat"):
+        resolve_render_backend({**cfg, "backend": "gsplat"}, torch.device("cpu"))
+    assert render(random_field(4, 0), look_at(8, 6, eye=(0.0, 0.0, 3.0)), backend="auto").backend == "cpu"
 
 
 @pytest.mark.skipif(not NO_CUDA, reason="checks the error on a machine without CUDA")

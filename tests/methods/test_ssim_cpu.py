@@ -9,6 +9,7 @@ import torch
 from gsbench.methods import losses as L
 from gsbench.methods import ssim_cpu as SC
 from gsbench.methods.ssim_cpu import ssim_mean_cpu
+from gsbench.metrics.ssim_definition import SSIM_C1, SSIM_C2, SSIM_WINDOW
 
 
 def _window(dtype=torch.float64):
@@ -39,6 +40,31 @@ def test_float64_equals_the_pytorch_ssim_map_value_and_both_gradients(shape):
     assert got[0] == pytest.approx(ref[0], abs=1e-13)
     for g_ref, g_got in zip(ref[1:], got[1:]):
         torch.testing.assert_close(g_got, g_ref, rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("shape", [(24, 31, 3), (11, 11, 1), (12, 6, 2)])
+def test_agrees_with_the_pytorch_ssim_map_where_only_the_border_differs(shape):
+    """Images equal inside and different only in the 5-px frame the zero padding reaches: the value
+    and both gradients come from the border pixels, and the two training forms agree there."""
+    a, b = _pair(*shape, seed=7)
+    r = SSIM_WINDOW // 2
+    b[r:-r, r:-r] = a[r:-r, r:-r]
+    ref = _value_and_grads(lambda x, y: L.ssim_map(x, y).mean(), a, b)
+    got = _value_and_grads(lambda x, y: ssim_mean_cpu(x, y, _window(), SSIM_C1, SSIM_C2), a, b)
+    assert ref[0] < 1.0 - 1e-3                     # the frame does differ
+    assert got[0] == pytest.approx(ref[0], abs=1e-13)
+    for g_ref, g_got in zip(ref[1:], got[1:]):
+        torch.testing.assert_close(g_got, g_ref, rtol=1e-10, atol=1e-14)
+
+
+def test_the_training_forms_take_the_one_ssim_definition():
+    import inspect
+
+    from gsbench.metrics import ssim_definition as D
+    for fn in (L.ssim, L.ssim_map):
+        params = inspect.signature(fn).parameters
+        assert params["window_size"].default == D.SSIM_WINDOW and params["sigma"].default == D.SSIM_SIGMA
+    assert (L.SSIM_C1, L.SSIM_C2) == (D.SSIM_C1, D.SSIM_C2) and SC.CLAMP == D.SSIM_TRAIN_DEN_FLOOR
 
 
 @pytest.mark.parametrize("va, vb", [(0.0, 0.0), (0.3, 0.3), (0.0, 1.0)])

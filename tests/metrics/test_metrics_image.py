@@ -176,6 +176,39 @@ def test_default_ssim_is_the_3dgs_form(shape):
     assert ssim(a, b, border="zeropad") == pytest.approx(ref, abs=1e-10)
 
 
+@pytest.mark.parametrize("shape", [(40, 52, 3), (9, 14, 1), (23, 17), (4, 3, 3)])
+def test_zeropad_metric_map_is_the_training_ssim_map_borders_included(shape):
+    """The metric's default form and the training loss (methods/losses.py, and through `losses.ssim` on
+    the CPU methods/ssim_cpu.py) are one formula with one set of constants (metrics/ssim_definition.py):
+    their per-pixel maps agree in float64 everywhere, the 5-px frame the zero padding reaches included
+    (shapes below the window size are all frame)."""
+    from gsbench.methods import losses as L
+    rng = np.random.default_rng(sum(shape))
+    a = rng.random(shape)
+    b = np.clip(a + 0.2 * rng.standard_normal(shape), 0, 1)
+    want = ssim_map(a, b, border="zeropad")
+    got = L.ssim_map(torch.from_numpy(a), torch.from_numpy(b))[0].permute(1, 2, 0).numpy()
+    assert got.shape == want.shape
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    r = 5
+    frame = np.ones(want.shape[:2], bool)
+    frame[r:-r, r:-r] = False
+    np.testing.assert_allclose(got[frame], want[frame], rtol=0, atol=1e-12)
+    assert float(L.ssim(torch.from_numpy(a), torch.from_numpy(b))) == pytest.approx(ssim(a, b), abs=1e-12)
+
+
+def test_ssim_constants_and_window_are_the_one_definition():
+    from gsbench.methods import losses as L
+    from gsbench.metrics import ssim_definition as D
+    from gsbench.metrics.image import gaussian_window
+    assert (D.SSIM_WINDOW, D.SSIM_SIGMA, D.SSIM_C1, D.SSIM_C2) == (11, 1.5, 0.01 ** 2, 0.03 ** 2)
+    assert (L.SSIM_C1, L.SSIM_C2) == (D.SSIM_C1, D.SSIM_C2)
+    # the training loss computes its taps with torch, the metric with numpy: the same taps to float64 precision
+    for size, sigma in ((D.SSIM_WINDOW, D.SSIM_SIGMA), (7, 1.0), (13, 2.0)):
+        np.testing.assert_allclose(L._gaussian_1d(size, sigma, "cpu", torch.float64).numpy(),
+                                   gaussian_window(size, sigma), rtol=0, atol=1e-15)
+
+
 def test_3dgs_form_reads_higher_than_the_valid_region():
     """The zero frame is shared by both images, so the 3DGS form reads above the valid-region mean
     (the docs said the opposite before): measured on 128x96 natural-like pairs at three noise levels."""

@@ -32,7 +32,11 @@ def _scene(n: int = 120, seed: int = 0, n_feat: int = 3, sh: int = 0):
     return field, cam
 
 
-def test_auto_resolves_gsplat_on_cuda_and_cpu_otherwise():
+def test_auto_resolves_gsplat_on_cuda_and_cpu_otherwise(monkeypatch):
+    # the one rule (render/backend_choice.py) picks gsplat on CUDA where gsplat can render (faked here;
+    # tests/methods/test_device.py checks the torch fallback where it cannot)
+    import gsbench.render.backend_choice as D
+    monkeypatch.setattr(D, "gsplat_available", lambda: True)
     assert resolve_backend("auto", torch.device("cuda")) == "gsplat"
     assert resolve_backend("auto", torch.device("cpu")) == "cpu"
 

@@ -17,15 +17,17 @@ import numpy as np
 import pytest
 import torch
 
-import gsbench.methods.backend_choice as D
+import gsbench.render.backend_choice as D
 import gsbench.render.gsplat_ext as G
 from gsbench.config import load_config
+from gsbench.device import resolve_device
 from gsbench.errors import InputError
+from gsbench.methods.common import prebuild_for
 from gsbench.render.gsplat_ext import GsplatStatus
 from paths import REPO_ROOT
 
 ROOT = REPO_ROOT
-CPU_PRESETS = ("cpu-small", "cpu-medium")     # they pin backend: cpu
+CPU_PRESETS = ("cpu-small", "cpu-medium", "cpu-real")     # they pin backend: cpu
 GPU_PRESETS = (None, "paper")                 # backend auto
 REAL_GSPLAT_AVAILABLE = D.gsplat_available
 
@@ -52,8 +54,8 @@ def _real_gsplat_check(mp) -> None:
 
 
 def _resolve(cfg: dict) -> tuple[str, str]:
-    dev = D.resolve_device(cfg)
-    return str(dev), D.resolve_backend_for(cfg.get("backend", "auto"), dev)
+    dev = resolve_device(cfg)
+    return str(dev), D.resolve_backend(cfg.get("backend", "auto"), dev)
 
 
 # ---------------------------------------------------------------------------- point 1: presets and grids
@@ -160,11 +162,11 @@ def test_gsplat_without_extension_or_toolkit_is_not_picked(fake_cuda, fake_gspla
     st = G.gsplat_status()
     assert st.state == G.NO_TOOLKIT and st.version == "1.5.3" and not st.usable
     cuda = torch.device("cuda", 0)
-    with caplog.at_level("WARNING", logger="gsbench.methods.backend_choice"):
-        assert D.resolve_backend_for("auto", cuda) == "torch"
+    with caplog.at_level("WARNING", logger="gsbench.render.backend_choice"):
+        assert D.resolve_backend("auto", cuda) == "torch"
     assert "no CUDA toolkit" in caplog.text
     with pytest.raises(InputError, match="gsplat cannot render here"):
-        D.resolve_backend_for("gsplat", cuda)
+        D.resolve_backend("gsplat", cuda)
     with pytest.raises(InputError, match="no CUDA toolkit"):
         G.build_gsplat_extension()
     assert sys.gsplat_fake_compiled is False        # nothing was compiled or loaded by the checks
@@ -175,7 +177,7 @@ def test_gsplat_extension_states_are_read_from_files(fake_cuda, fake_gsplat, tmp
     _real_gsplat_check(fake_cuda)
     fake_cuda.setattr(G, "_nvcc", lambda: "/opt/cuda/bin/nvcc")
     assert G.gsplat_status().state == G.NEEDS_BUILD
-    assert D.resolve_backend_for("auto", torch.device("cuda", 0)) == "gsplat"
+    assert D.resolve_backend("auto", torch.device("cuda", 0)) == "gsplat"
     assert main(["doctor"]) == 0
     out = capsys.readouterr().out
     assert "gsplat   1.5.3: needs-build: CUDA extension not built" in out and "--build-gsplat" in out
@@ -192,9 +194,9 @@ def test_a_grid_builds_gsplat_once_before_its_workers_and_only_when_a_cell_uses_
     _real_gsplat_check(fake_cuda)
     fake_cuda.setattr(G, "_nvcc", lambda: "/opt/cuda/bin/nvcc")
     cpu_cells = [load_config("vanilla", "cpu-small", []), load_config("gaussiands", "cpu-medium", [])]
-    assert D.prebuild_for(cpu_cells) is False and sys.gsplat_fake_compiled is False
+    assert prebuild_for(cpu_cells) is False and sys.gsplat_fake_compiled is False
     with caplog.at_level("WARNING", logger="gsbench.render.gsplat_ext"):
-        assert D.prebuild_for(cpu_cells + [load_config("vanilla", None, [])]) is True
+        assert prebuild_for(cpu_cells + [load_config("vanilla", None, [])]) is True
     assert sys.gsplat_fake_compiled is True and "compiling its CUDA extension" in caplog.text
     assert G.gsplat_status().state == G.READY       # loaded in this process now
 
