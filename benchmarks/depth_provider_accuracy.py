@@ -37,11 +37,11 @@ import gsbench  # noqa: F401  (before torch: gsbench's OpenMP default)
 from gsbench.camera import training_size
 from gsbench.cli import main as gsbench_main
 from gsbench.datasets import load_scene
-from gsbench.methods.losses import depth_edges
 from gsbench.priors import depth as D
 from gsbench.priors import sfm_depth as S
 from gsbench.priors.warp import camera_at
 from gsbench.resize import resize_nearest
+from gsbench.train.losses import depth_edges
 
 GT_DISTORTION = 1.0          # the gt provider's default severity
 

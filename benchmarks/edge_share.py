@@ -31,10 +31,10 @@ import gsbench  # noqa: F401  (before torch: gsbench's OpenMP default)
 from gsbench.cli import main as gsbench_main
 from gsbench.config import load_config
 from gsbench.datasets import load_scene
-from gsbench.methods.losses import EDGE_FLOOR, depth_edges, edge_coverage
 from gsbench.methods.registry import build_priors_request
 from gsbench.priors import depth as current_depth
 from gsbench.resize import resize_nearest
+from gsbench.train.losses import EDGE_FLOOR, depth_edges, edge_coverage
 
 
 def parse_size(text: str) -> tuple[int, int]:

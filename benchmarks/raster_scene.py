@@ -45,7 +45,7 @@ def make(out: Path, size: str) -> None:
     import train_speed as TS
 
     from gsbench.datasets import load_scene
-    from gsbench.methods.base import scene_init
+    from gsbench.train.initial_field import scene_init
     n, wh = size.split("@")
     w, h = (int(v) for v in wh.split("x"))
     root = Path(tempfile.mkdtemp(prefix="gsbench-raster-scene-"))

@@ -7,7 +7,7 @@ Phases, each timed and with its own peak resident memory (the kernel's peak-RSS 
 at the start of each phase, gsbench.environment.PeakMemory):
   generate  the synthetic room-medium layout at --views x --size with --gaussians sparse points
             (skipped with --scene, or when --work already holds this scene);
-  load      the scene folder and every training image at the training size (methods.base.load_views);
+  load      the scene folder and every training image at the training size (gsbench.train.views.load_views);
   priors    depth, masks and features with the weight-free providers of default.yaml, into an empty cache;
   cache     the same request again: every part read back from the cache;
   train     `gsbench train`'s path (gsbench.runs.train_run) for --steps steps: priors from the cache,
@@ -116,9 +116,9 @@ def _run(args, work: Path) -> int:
 
     from gsbench.datasets import load_scene
     from gsbench.datasets.synthetic import make_scene
-    from gsbench.methods.base import load_views
-    from gsbench.methods.common import fit_priors
+    from gsbench.methods.base import fit_priors
     from gsbench.runs import train_run
+    from gsbench.train.views import load_views
     from gsbench.trained_run import load_run
     W, H = args.size
     width = args.train_width or W

@@ -38,9 +38,9 @@ import torch
 
 from gsbench import rundir
 from gsbench.gaussians import GaussianField
-from gsbench.methods.adam import Adam
 from gsbench.render import render
 from gsbench.render.threads import torch_ops_serial
+from gsbench.train.adam import Adam
 
 
 def _sync(device: torch.device) -> None:
@@ -69,7 +69,8 @@ def reference_its(n: int, w: int, h: int, device: torch.device, iters: int, root
     """it/s of a bare step (render RGB + 3 features + depth, L1, backward, Adam) on the same scene,
     views and initial Gaussians as the harness rows, so the rasterisation work is the same."""
     from gsbench.datasets import load_scene
-    from gsbench.methods.base import load_views, scene_init
+    from gsbench.train.initial_field import scene_init
+    from gsbench.train.views import load_views
     cfg = _config("gaussiands", n, w, device, iters, iters, root)
     scene = load_scene(_scene(root, w, h))
     views, _ = load_views(scene, cfg, device=device)

@@ -104,7 +104,7 @@ QUERY_MODES = ("encode", "decode")
 PROTOCOLS = ("auto", "lerf", "3dovs")
 LPIPS_NETS = ("vgg", "alex")
 HOLDOUTS = ("every-8", "none")
-DATA_PLACES = ("device", "host")   # train.data_on: where per-view training data lives (methods/residency.py)
+DATA_PLACES = ("device", "host")   # train.data_on: where per-view training data lives (gsbench/train/residency.py)
 EVAL_RESOLUTIONS = ("reference", "train")
 LERF_KERNEL_MODES = ("auto", "reference")
 

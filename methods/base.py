@@ -27,23 +27,21 @@ from typing import Generator, Optional
 import numpy as np
 import torch
 
-from gsbench.camera import Camera, training_size
+from gsbench import rundir
+from gsbench.camera import Camera
 from gsbench.config import setting
 from gsbench.config_keys import QUERY_MODES
-from gsbench.datasets.splits import split_ids
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.gaussians import GaussianField
-from gsbench.methods.autoencoder import FeatureAutoencoder
-from gsbench.methods.common import prepare_backend, resolve_render_backend
-from gsbench.methods.feature_blocks import FeatureBlocks
-from gsbench.methods.registry import get_method
-from gsbench.methods.residency import DEVICE, data_on, place
-from gsbench.methods.trainer import Trainer, TrainViews, init_field
-from gsbench.priors import get_feature_provider
+from gsbench.methods.registry import build_priors_request, get_method
+from gsbench.priors import get_feature_provider, prepare_priors
 from gsbench.render import RenderOutput, render, resolve_backend
-from gsbench.resize import resize_rgb
 from gsbench.store import load_torch, save_torch_atomic
+from gsbench.train.autoencoder import FeatureAutoencoder
+from gsbench.train.feature_blocks import FeatureBlocks
+from gsbench.train.render_backend import prepare_backend, resolve_render_backend
+from gsbench.train.trainer import Trainer
 
 # what train_phases returns: yields each phase's Trainer, receives that phase's final field
 Phases = Generator[Trainer, GaussianField, None]
@@ -242,102 +240,18 @@ def _check_mode(mode: str) -> None:
 
 
 # ---------------------------------------------------------------------------- shared data preparation
-def load_views(scene, config: dict, progress: bool = False,
-               device: torch.device | str = "cpu") -> tuple[TrainViews, tuple[int, int]]:
-    """Train cameras/images at the training resolution (images on `device`, copied once, or on the host
-    with train.data_on=host), plus the
-    first `eval_views` test views."""
-    tcfg = config["train"]
-    train_ids, test_ids = split_ids(scene, config)
-    if not train_ids:
+def cache_dir_for(config: dict, run_dir: Path) -> Path:
+    c = config["priors"].get("cache_dir")
+    return Path(c) if c else Path(run_dir).resolve().parent / rundir.CACHE_DIRNAME
+
+
+def fit_priors(scene, config: dict, run_dir: Path, *, progress: bool):
+    """The priors of a method's train_phases(): computed from the registry's priors request, the same dict a grid builds
+    to share priors between cells, so the two cannot ask for different cache entries."""
+    req = build_priors_request(config, scene)
+    if req is None:
         raise InputError(f"{scene.path}: the scene has no training views")
-    W, H = training_size(scene.cameras[train_ids[0]], tcfg.get("max_width"))
-
-    def load(i: int) -> tuple[Camera, torch.Tensor]:
-        img = np.asarray(scene.image(i), dtype=np.float32)
-        if img.ndim != 3 or img.shape[2] < 3:
-            raise InputError(f"{scene.image_paths[i] if scene.image_paths else scene.path}: expected an RGB image, "
-                             f"got shape {img.shape}")
-        img = img[..., :3]
-        img = resize_rgb(img, W, H)        # 3DGS's rule: PIL bicubic on the 8-bit image
-        return scene.cameras[i].resized(W, H), torch.from_numpy(np.clip(img, 0.0, 1.0).copy())
-
-    views = TrainViews({}, {})
-    for i in train_ids:
-        views.cameras[i], views.images[i] = load(i)
-    n_eval = int(tcfg.get("eval_views") or 0)
-    test = list(test_ids)
-    if n_eval > 0 and test:
-        pick = [test[int(j)]
-                for j in np.unique(np.linspace(0, len(test) - 1, min(n_eval, len(test))).round().astype(int))]
-        for i in pick:
-            views.eval_cameras[i], views.eval_images[i] = load(i)
-    on = data_on(config)     # the periodic-eval images are few: they stay on the device
-    views.images, views.eval_images = place(views.images, device, on), place(views.eval_images, device, DEVICE)
-    return views, (W, H)
-
-
-FORWARD_FACING_LAYOUTS = ("llff", "3dovs")
-
-
-def frustum_points(cameras: list[Camera], near: float, far: float, n: int, seed: int) -> np.ndarray:
-    """n points uniform over the pixels of the given cameras, at depths uniform in inverse depth
-    between `near` and `far` (forward-facing captures: the volume the cameras actually see)."""
-    if not (np.isfinite(near) and np.isfinite(far)) or near <= 0 or far <= near:
-        raise ValueError(f"frustum init needs 0 < near < far, got near={near}, far={far}")
-    rng = np.random.default_rng(seed)
-    ci = rng.integers(0, len(cameras), size=n)
-    out = np.empty((n, 3))
-    inv = 1.0 / near + rng.random(n) * (1.0 / far - 1.0 / near)
-    z = 1.0 / inv
-    for k, cam in enumerate(cameras):
-        sel = np.nonzero(ci == k)[0]
-        if sel.size == 0:
-            continue
-        u = rng.random(sel.size) * cam.width
-        v = rng.random(sel.size) * cam.height
-        pc = np.stack([(u - cam.cx) / cam.fx * z[sel], (v - cam.cy) / cam.fy * z[sel], z[sel]], axis=1)
-        c2w = cam.camera_to_world
-        out[sel] = pc @ c2w[:3, :3].T + c2w[:3, 3]
-    return out
-
-
-def init_mode(scene, config: dict) -> str:
-    """The concrete init mode: 'auto' = sparse points when the scene has them, else the near/far
-    frusta for forward-facing layouts that know their bounds, else a random cube."""
-    mode = config["train"]["init"]["mode"]
-    if mode != "auto":
-        return mode
-    if scene.has_points:
-        return "points"
-    meta = getattr(scene, "meta", {}) or {}
-    if getattr(scene, "layout", "") in FORWARD_FACING_LAYOUTS and "near" in meta and "far" in meta:
-        return "frustum"
-    return "random"
-
-
-def scene_init(scene, config: dict, feature_dim: int):
-    """Initial field from the config's init mode (see `init_mode`); returns (field, how)."""
-    icfg = config["train"]["init"]
-    mode = init_mode(scene, config)
-    centres = np.stack([c.center for c in scene.cameras])
-    centre = centres.mean(0)
-    half = float(scene.extent or 1.0) * float(icfg.get("random_scale", 1.0))
-    pc = getattr(scene, "point_colors", None)
-    sh = int(config["train"]["sh_degree"])
-    if mode == "frustum":
-        meta = getattr(scene, "meta", {}) or {}
-        if "near" not in meta or "far" not in meta:
-            raise ValueError(f"{scene.path}: train.init.mode=frustum needs the scene's near/far bounds "
-                             f"(LLFF poses_bounds)")
-        near, far = float(meta["near"]), float(meta["far"])
-        n = max(1, int(icfg["num_random"]))
-        # the cameras the run trains on (train.views, train.holdout), not the scene's whole training split:
-        # a few-view run must not start from points spread over views it never sees
-        cams = [scene.cameras[i] for i in split_ids(scene, config)[0]]
-        xyz = frustum_points(cams, near, far, n, int(config["seed"]))
-        rgb = np.random.default_rng(int(config["seed"]) + 1).random((n, 3))
-        fld, _ = init_field(xyz, rgb, "points", n, centre, half, sh, feature_dim, int(config["seed"]), None)
-        return fld, f"frustum ({n} in the train cameras' frusta, depth {near:.4g}..{far:.4g}, uniform in 1/z)"
-    return init_field(scene.points, pc, mode, int(icfg["num_random"]), centre, half, sh, feature_dim,
-                      int(config["seed"]), icfg.get("max_points"))
+    return prepare_priors(scene, req["priors"], req["view_ids"], tuple(req["size"]), cache_dir_for(config, run_dir),
+                          need_depth=req["need_depth"], need_masks=req["need_sem"], need_features=req["need_sem"],
+                          per_frame_masks=req["per_frame"], seed=req["seed"], progress=progress,
+                          device=str(resolve_device(config)))

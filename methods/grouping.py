@@ -35,14 +35,16 @@ import torch
 
 from gsbench.errors import InputError
 from gsbench.gaussians import SH_C0
-from gsbench.methods.adam import Adam
-from gsbench.methods.base import Method, Phases, _check_mode, _unit, load_views, scene_init
-from gsbench.methods.common import fit_priors, uses
-from gsbench.methods.feature_blocks import FeatureBlocks
+from gsbench.methods.base import Method, Phases, _check_mode, _unit, fit_priors
 from gsbench.methods.grouping_spec import budget
-from gsbench.methods.losses import reconstruction_loss
-from gsbench.methods.residency import data_on, place
-from gsbench.methods.trainer import LossResult, Trainer
+from gsbench.methods.registry import uses
+from gsbench.train.adam import Adam
+from gsbench.train.feature_blocks import FeatureBlocks
+from gsbench.train.initial_field import scene_init
+from gsbench.train.losses import reconstruction_loss
+from gsbench.train.residency import data_on, place
+from gsbench.train.trainer import LossResult, Trainer
+from gsbench.train.views import load_views
 
 log = logging.getLogger(__name__)
 NO_MASK = 0          # class of pixels outside every mask

@@ -73,7 +73,7 @@ def priors_request(config: dict, scene) -> Optional[dict]:
 
     `config` may be resolved or not (it is resolved for `scene` here); `scene` is a loaded scene or
     its folder. A grid groups cells by this dict; train_phases() computes its priors from the same dict
-    (methods/common.py fit_priors), so equal requests hit the same cache entry.
+    (methods/base.py fit_priors), so equal requests hit the same cache entry.
     """
     req = build_priors_request(config, scene)
     if req is None or not (req["need_depth"] or req["need_sem"]):

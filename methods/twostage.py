@@ -13,14 +13,16 @@ from typing import Optional
 
 import torch
 
-from gsbench.methods.base import Method, Phases, load_views, scene_init
-from gsbench.methods.common import fit_priors, make_trainer, uses
-from gsbench.methods.losses import sem_loss
-from gsbench.methods.residency import data_on
-from gsbench.methods.semantic import semantic_targets
-from gsbench.methods.trainer import LossResult, field_from_params
+from gsbench.methods.base import Method, Phases, fit_priors
+from gsbench.methods.registry import uses
 from gsbench.methods.twostage_spec import budget, semantic_budget
 from gsbench.methods.vanilla import rgb_loss_fn
+from gsbench.train.initial_field import scene_init
+from gsbench.train.losses import sem_loss
+from gsbench.train.residency import data_on
+from gsbench.train.semantic_targets import semantic_targets
+from gsbench.train.trainer import LossResult, field_from_params, make_trainer
+from gsbench.train.views import load_views
 
 
 class TwoStage(Method):

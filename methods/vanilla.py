@@ -6,11 +6,12 @@ from typing import Optional
 
 import torch
 
-from gsbench.methods.base import Method, Phases, load_views, scene_init
-from gsbench.methods.common import make_trainer
-from gsbench.methods.losses import reconstruction_loss
-from gsbench.methods.trainer import LossResult
+from gsbench.methods.base import Method, Phases
 from gsbench.methods.vanilla_spec import budget
+from gsbench.train.initial_field import scene_init
+from gsbench.train.losses import reconstruction_loss
+from gsbench.train.trainer import LossResult, make_trainer
+from gsbench.train.views import load_views
 
 
 def rgb_loss_fn(lam_dssim: float):

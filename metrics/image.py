@@ -21,7 +21,7 @@ population (not sample) covariances, mean over the map and the channels. Border 
             skimage.metrics.structural_similarity(gaussian_weights=True, sigma=1.5,
             use_sample_covariance=False, data_range=1) to floating-point precision.
 The constants are the one SSIM definition (metrics/ssim_definition.py), shared with the training loss
-(methods/losses.py, methods/ssim_cpu.py); its "zeropad" map is the training form's to float tolerance
+(gsbench/train/losses.py, gsbench/train/ssim_cpu.py); its "zeropad" map is the training form's to float tolerance
 (tests/metrics/test_metrics_image.py). It stays a separate code path because an evaluation number is
 computed in float64 from clipped images (with the "valid" border as a second convention, and a
 denominator floor of 1e-20 instead of the training forms' 1e-12), while the training forms work in

@@ -2,8 +2,8 @@
 
 Three forms compute it and take their constants from here:
   metrics/image.py      the evaluation metric (numpy/cv2, float64, border "zeropad" or "valid")
-  methods/losses.py     the training loss (PyTorch, differentiable, zero padding)
-  methods/ssim_cpu.py   the training loss's CPU kernel (numba, hand-written backward, zero padding)
+  gsbench/train/losses.py     the training loss (PyTorch, differentiable, zero padding)
+  gsbench/train/ssim_cpu.py   the training loss's CPU kernel (numba, hand-written backward, zero padding)
 
 SSIM of one channel at a pixel, with mu, sigma^2 and sigma_ab the Gaussian-weighted local means,
 population variances and covariance of images a and b:

@@ -30,7 +30,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from gsbench.methods.gaussiands.paper import MAX, PAPER_CLAIMS, ROBUST_MARGIN_DB, Claim
-from gsbench.methods.losses import EDGE_FLOOR
 from gsbench.reports.ablations import _covered, run_dropped
 from gsbench.reports.controls import blind_claims, starved
 from gsbench.reports.data import Results, same
@@ -39,6 +38,7 @@ from gsbench.reports.stats import Diff, compare, family_note, mde_r, pearson, pe
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
 from gsbench.reports.sweeps import lambda_points
 from gsbench.reports.table import Cell, Column, Row, Table
+from gsbench.train.losses import EDGE_FLOOR
 
 REPRODUCED, OPPOSITE, INCONCLUSIVE, NOT_RUN, NOT_TESTABLE = (
     "reproduced", "opposite", "inconclusive", "not run", "not testable")

@@ -21,9 +21,9 @@ from threadpoolctl import threadpool_limits
 from gsbench.config import setting
 from gsbench.config_keys import QUERY_MODES
 from gsbench.errors import InputError
-from gsbench.methods.feature_blocks import FeatureBlocks
 from gsbench.metric_table import FRAME_SET_SUFFIX, SEG_BASES, seg_metric
 from gsbench.metrics import lerf, ovs3d, pixel_norms, pixel_text_cosines
+from gsbench.train.feature_blocks import FeatureBlocks
 
 from .block import Block, to_numpy
 from .frames import eval_settings, ovs3d_downsample, segmentation_camera, size_text, view_name

@@ -20,10 +20,10 @@ from gsbench.grids.grid_file import Grid
 from gsbench.grids.liveness import CELL_FILE, CELL_STATUS_FILE, HEARTBEAT_S, cell_state, read_cell_status
 from gsbench.grids.planning import PlannedCell, plan, write_manifest
 from gsbench.grids.priors_share import shared_priors
-from gsbench.methods.common import prebuild_for
 from gsbench.runlock import RunLock, RunLockedError
 from gsbench.runs import train_run
 from gsbench.store import write_json_atomic
+from gsbench.train.render_backend import prebuild_for
 
 log_ = logging.getLogger(__name__)
 

@@ -6,7 +6,7 @@
                                       CUDA, gsplat off CUDA or without a usable gsplat, cpu without
                                       numba, an unknown name)
 
-The methods resolve a run's backend with it once, up front (`methods/common.py`
+The methods resolve a run's backend with it once, up front (`gsbench/train/render_backend.py`
 `resolve_render_backend`, `Method.load`), and so do grids (gsplat's one-time build) and `gsbench
 doctor`; `render()` resolves `auto` with it and trusts a concrete name, so no frame re-reads gsplat's
 files. Which device `train.device: auto` picks is gsbench/device.py.

@@ -1,7 +1,7 @@
 """The training loop: the harness owns it, the methods give it phases to run.
 
 A method's `train_phases(scene, run_dir, config, resume, progress)` (gsbench.methods.base) prepares
-its data and yields one optimisation phase at a time (a `gsbench.methods.trainer.Trainer`: the 3DGS
+its data and yields one optimisation phase at a time (a `gsbench.train.trainer.Trainer`: the 3DGS
 recipe with the method's loss; twostage yields two). For each phase this module runs the steps
 (`Trainer.train_iteration`), and owns everything around them:
 - resume: a checkpoint of that phase restores its state, and train_log.jsonl is cut back to the
@@ -33,7 +33,7 @@ from gsbench.config import setting
 from gsbench.errors import InputError
 from gsbench.evaluation import segmentation_metrics
 from gsbench.gaussians import GaussianField
-from gsbench.methods.trainer import Trainer, load_checkpoint_if_any
+from gsbench.train.trainer import Trainer, load_checkpoint_if_any
 from gsbench.metrics import psnr, ssim
 from gsbench.render import render
 from gsbench.store import append_jsonl, read_jsonl, save_torch_atomic, write_text_atomic

@@ -6,8 +6,8 @@ from typing import Callable
 import numpy as np
 import torch
 
-from gsbench.methods.losses import depth_loss, solve_scale_shift
 from gsbench.stress.core import Case, CaseResult, _depth_pair, _grads, _leaf, all_finite, compare, scaled_err
+from gsbench.train.losses import depth_loss, solve_scale_shift
 
 
 # ---------------------------------------------------------------------------- scale-shift depth solve

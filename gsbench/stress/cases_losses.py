@@ -11,8 +11,9 @@ from gsbench.gaussians import GaussianField
 
 from gsbench.stress.core import (Case, CaseResult, _camera, _depth_pair, _field, _grads, _images, _leaf,  # isort: skip
                                  _result, all_finite)
-from gsbench.methods.autoencoder import FeatureAutoencoder
-from gsbench.methods.losses import (
+from gsbench.render import render
+from gsbench.train.autoencoder import FeatureAutoencoder
+from gsbench.train.losses import (
     DEPTH_FORMULATIONS,
     depth_edges,
     depth_loss,
@@ -21,7 +22,6 @@ from gsbench.methods.losses import (
     sem_loss,
     tv_loss,
 )
-from gsbench.render import render
 
 
 def _loss_case(comp: str, fn: Callable[..., Optional[torch.Tensor]], inputs: list, grad_mask: list[bool],

@@ -19,16 +19,19 @@ from typing import Any, Callable, Optional
 import numpy as np
 import torch
 
-from gsbench.methods.base import Method, Phases, load_views, scene_init
-from gsbench.methods.common import fit_priors, make_trainer, uses
+from gsbench.methods.base import Method, Phases, fit_priors
+from gsbench.methods.registry import uses
+from gsbench.train.initial_field import scene_init
+from gsbench.train.trainer import make_trainer
+from gsbench.train.views import load_views
 
-from gsbench.methods.losses import (EDGE_FLOOR, depth_edges, depth_loss, ds_loss, edge_coverage,  # isort: skip
+from gsbench.train.losses import (EDGE_FLOOR, depth_edges, depth_loss, ds_loss, edge_coverage,  # isort: skip
                                     expected_depth, normalised_depth, reconstruction_loss, sem_loss, tv_loss)
 from gsbench.config import setting
 from gsbench.methods.gaussiands.spec import budget
-from gsbench.methods.residency import data_on, place
-from gsbench.methods.semantic import semantic_targets
-from gsbench.methods.trainer import LossResult
+from gsbench.train.residency import data_on, place
+from gsbench.train.semantic_targets import semantic_targets
+from gsbench.train.trainer import LossResult
 
 log = logging.getLogger(__name__)
 

@@ -286,7 +286,6 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     from gsbench.datasets.splits import HOLDOUT_CHOICES
     from gsbench.evaluation.frames import RESOLUTIONS
     from gsbench.evaluation.segmentation import PROTOCOLS
-    from gsbench.methods.losses import DEPTH_FORMULATIONS, DS_AVERAGES
     from gsbench.metrics.lerf import LERF_KERNEL_MODES
     from gsbench.priors.depth import DEPTH_PROVIDERS
     from gsbench.priors.features import FEATURE_PROVIDERS
@@ -294,6 +293,7 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     from gsbench.priors.pipeline import MASK_PROVIDERS, PROPAGATORS
     from gsbench.priors.propagation import NEW_OBJECT_RULES
     from gsbench.render import BACKENDS
+    from gsbench.train.losses import DEPTH_FORMULATIONS, DS_AVERAGES
     assert set(config_keys.HOLDOUTS) == set(HOLDOUT_CHOICES)
     assert set(config_keys.EVAL_RESOLUTIONS) == set(RESOLUTIONS)
     assert set(config_keys.LERF_KERNEL_MODES) == set(LERF_KERNEL_MODES)

@@ -20,8 +20,9 @@ ALLOWED: set[tuple[str, str]] = {
     ("gsbench/priors/features.py", "context"), ("gsbench/priors/features.py", "model"),
     ("gsbench/priors/pipeline.py", "provider"), ("gsbench/priors/pipeline.py", "new_objects"),
     ("gsbench/priors/pipeline.py", "propagator"), ("gsbench/priors/pipeline.py", "ordering"),
-    ("gsbench/priors/pipeline.py", "per_track"), ("methods/semantic.py", "epochs"), ("methods/semantic.py", "lr"),
-    ("methods/base.py", "random_scale"), ("methods/semantic.py", "hidden"), ("gsbench/priors/masks.py", "generator"),
+    ("gsbench/priors/pipeline.py", "per_track"), ("gsbench/train/semantic_targets.py", "epochs"),
+    ("gsbench/train/semantic_targets.py", "lr"), ("gsbench/train/initial_field.py", "random_scale"),
+    ("gsbench/train/semantic_targets.py", "hidden"), ("gsbench/priors/masks.py", "generator"),
     # not config sections: a scene's gsbench_scene.json, a grid file's scene entry, a doctor report row
     ("datasets/loader.py", "generator"), ("gsbench/grids/grid_file.py", "seed"),
     ("gsbench/commands/doctor.py", "backend"), ("gsbench/commands/doctor.py", "device"),

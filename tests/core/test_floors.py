@@ -54,7 +54,9 @@ FLOORS: dict[str, int] = {
     "gsbench.priors": 1,
     "gsbench.metrics": 1,
     "gsbench.datasets": 1,
-    # 2
+    # 2: the training engine, and the methods built on it (gsbench.train imports no method:
+    # test_the_engine_imports_no_method)
+    "gsbench.train": 2,
     "gsbench.methods": 2,
     "gsbench.trained_run": 2,      # load_run: a finished run folder read back (evaluation reads it)
     # 3: what runs and scores methods
@@ -322,6 +324,15 @@ def test_no_module_imports_from_a_floor_above():
     assert not new, "upward imports:\n" + "\n".join(new)
     gone = sorted(ALLOWED_UPWARD - seen)
     assert not gone, f"no longer imported upward, remove from ALLOWED_UPWARD: {gone}"
+
+
+def test_the_engine_imports_no_method():
+    """gsbench.train sits beside gsbench.methods on floor 2 and below it in use: the methods build on the
+    engine, never the other way (a method's own parts reach the engine as arguments: its loss, its
+    strategy, its extra optimiser)."""
+    bad = sorted(f"{i.path.relative_to(ROOT)}:{i.line}: {i.source} imports {t}" for i in imports()
+                 for t in _imported(i.target) if part_of(i.source) == "gsbench.train" and part_of(t) == "gsbench.methods")
+    assert not bad, "the engine imports a method module:\n" + "\n".join(bad)
 
 
 def test_every_function_level_import_says_why():

@@ -284,8 +284,8 @@ def test_gt_and_training_images_are_resized_as_3dgs_loads_them(lerf_scene):
     import cv2
     from PIL import Image
 
-    from gsbench.methods.base import load_views
     from gsbench.resize import resize_rgb
+    from gsbench.train.views import load_views
     path = lerf_scene.image_paths[0]
     with Image.open(path) as im:
         ref = np.asarray(im.convert("RGB").resize((32, 24), Image.BICUBIC), np.float32) / 255.0

@@ -8,8 +8,8 @@ from gsbench.datasets.loader import load_scene
 from gsbench.datasets.synthetic import make_scene
 from gsbench.grids.claims_plan import plan_grids
 from gsbench.grids.grid_file import load_grid
-from gsbench.methods.losses import EDGE_FLOOR, depth_edges, edge_coverage
 from gsbench.priors.depth import compute_depth
+from gsbench.train.losses import EDGE_FLOOR, depth_edges, edge_coverage
 
 
 def _coverage(scene, tree: dict, size: tuple[int, int]) -> tuple[float, int]:

@@ -8,7 +8,7 @@ import sys
 import pytest
 import torch
 
-from gsbench.methods.adam import Adam
+from gsbench.train.adam import Adam
 
 SHAPES = [(100, 3), (100,), (50, 4), (7,)]
 
@@ -95,7 +95,7 @@ def test_zero_grad_and_parameters_without_gradients():
 
 
 def test_training_steps_do_not_import_dynamo():
-    code = ("import sys, torch\nfrom gsbench.methods.adam import Adam\n"
+    code = ("import sys, torch\nfrom gsbench.train.adam import Adam\n"
             "p = torch.ones(3, requires_grad=True); o = Adam([p]); (p * p).sum().backward(); o.step()\n"
             "o.zero_grad(); o.load_state_dict(o.state_dict())\n"
             "print('torch._dynamo' in sys.modules)")

@@ -5,10 +5,10 @@ import pytest
 
 from gsbench.camera import Camera
 from gsbench.config import load_config
-from gsbench.methods.base import frustum_points
-from gsbench.methods.trainer import sh_active_degree
 from gsbench.runs import train_run
 from gsbench.store import load_torch, read_json, read_jsonl
+from gsbench.train.initial_field import frustum_points
+from gsbench.train.trainer import sh_active_degree
 
 TINY = ["backend=cpu", "train.iterations=12", "train.max_width=32", "train.eval_every=0", "train.log_every=4",
         "train.checkpoint_every=0", "train.eval_views=1", "train.densify.enabled=false",
@@ -91,7 +91,7 @@ def test_frustum_points_lie_inside_the_bounds():
 def test_auto_init_mode_per_layout():
     from types import SimpleNamespace
 
-    from gsbench.methods.base import init_mode
+    from gsbench.train.initial_field import init_mode
     cfg = {"train": {"init": {"mode": "auto"}}}
     bounds = {"near": 1.0, "far": 5.0}
     assert init_mode(SimpleNamespace(has_points=True, layout="llff", meta=bounds), cfg) == "points"
@@ -108,7 +108,7 @@ def test_frustum_init_on_a_forward_facing_scene_without_points(tmp_path):
     its near and far bounds in front of the training cameras."""
     from gsbench.datasets import load_scene
     from gsbench.datasets.synthetic import make_scene
-    from gsbench.methods.base import scene_init
+    from gsbench.train.initial_field import scene_init
     root = make_scene("tabletop-small", tmp_path / "s", seed=0, views=6, resolution=(32, 24))
     if not (root / "poses_bounds.npy").is_file():
         pytest.skip("the generator wrote no poses_bounds.npy for this preset")

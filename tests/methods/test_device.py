@@ -49,11 +49,11 @@ def test_backend_for_cuda_device_without_gsplat_warns_once(monkeypatch, caplog):
 
 
 def test_methods_and_render_take_the_one_backend_rule(monkeypatch):
-    """A config's backend (methods/common.py) and render()'s `auto` are gsbench.render's rule, not copies."""
+    """A config's backend (gsbench/train/render_backend.py) and render()'s `auto` are gsbench.render's rule, not copies."""
     import gsbench.render.backend_choice as D
     from gsbench.config import load_config
-    from gsbench.methods.common import resolve_render_backend
     from gsbench.render import render
+    from gsbench.train.render_backend import resolve_render_backend
     cfg = load_config("vanilla", None, [])
     cuda = torch.device("cuda", 0)            # resolution only: nothing is allocated
     for usable, want in ((False, "torch"), (True, "gsplat")):

@@ -9,7 +9,7 @@ import pytest
 from gsbench.config import load_config
 from gsbench.datasets import load_scene
 from gsbench.datasets.synthetic import make_scene
-from gsbench.methods.base import frustum_points, scene_init
+from gsbench.train.initial_field import frustum_points, scene_init
 
 
 def test_frustum_init_uses_the_few_view_pick(tmp_path):

@@ -8,8 +8,8 @@ import torch
 
 from gsbench.camera import Camera
 from gsbench.gaussians import GaussianField
-from gsbench.methods.losses import depth_loss, normalised_depth, solve_scale_shift, tv_loss
 from gsbench.render import render
+from gsbench.train.losses import depth_loss, normalised_depth, solve_scale_shift, tv_loss
 
 LAM = {"depth": 0.01, "tv": 1.5}
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from gsbench.methods.losses import (depth_edges, depth_loss, ds_loss, l1, reconstruction_loss, sem_loss,  # isort: skip
+from gsbench.train.losses import (depth_edges, depth_loss, ds_loss, l1, reconstruction_loss, sem_loss,  # isort: skip
                                     solve_scale_shift, ssim, tv_loss)
 
 
@@ -158,7 +158,7 @@ def test_l1_and_reconstruction_hand_values():
 
 def test_ssim_constant_images_interior_formula():
     # away from the zero-padded border two constant images give (2 c1 c2 + C1) / (c1^2 + c2^2 + C1)
-    from gsbench.methods.losses import ssim_map
+    from gsbench.train.losses import ssim_map
     c1, c2 = 0.8, 0.4
     a = torch.full((40, 40, 1), c1, dtype=torch.float64)   # float64: E[x^2] - mu^2 cancels exactly enough
     b = torch.full((40, 40, 1), c2, dtype=torch.float64)
@@ -178,7 +178,7 @@ def test_ssim_matches_skimage_on_interior():
     _, full = skm.structural_similarity(x, y, gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
                                         data_range=1.0, full=True)
     # our SSIM with zero padding equals skimage's on pixels at least 5 from the border
-    from gsbench.methods import losses as L
+    from gsbench.train import losses as L
     xt, yt = torch.tensor(x)[..., None], torch.tensor(y)[..., None]
     a, b = xt.permute(2, 0, 1)[None], yt.permute(2, 0, 1)[None]
     w = L._gaussian_window(11, 1.5, 1, a.device, a.dtype)
@@ -252,7 +252,7 @@ def test_depth_edges_at_a_working_size_keep_out_of_invalid_pixels():
 
 
 def test_expected_depth_is_the_depth_of_the_covered_part():
-    from gsbench.methods.losses import expected_depth
+    from gsbench.train.losses import expected_depth
     D = torch.tensor([[2.0, 1.0, 0.0, 3.0]])
     alpha = torch.tensor([[1.0, 0.5, 0.0, 1e-4]])
     # 2 / 1 = 2, 1 / 0.5 = 2, uncovered pixels are 0 (the depth loss does not use them)
@@ -263,7 +263,7 @@ def test_depth_loss_does_not_read_coverage_as_depth():
     """Two surfaces at z = 1 and z = 2 with an exact disparity prior; half the far pixels are only
     half covered (composited D = 0.5 * 2 = 1). On D the loss sees them as near surface; on D / alpha
     it is zero."""
-    from gsbench.methods.losses import expected_depth
+    from gsbench.train.losses import expected_depth
     z = torch.tensor([[1.0, 1.0, 2.0, 2.0], [1.0, 1.0, 2.0, 2.0]])
     alpha = torch.tensor([[1.0, 1.0, 1.0, 0.5], [1.0, 1.0, 1.0, 0.5]])
     D = z * alpha
@@ -276,7 +276,7 @@ def test_depth_loss_does_not_read_coverage_as_depth():
 
 
 def test_edge_coverage_hand_computed():
-    from gsbench.methods.losses import edge_coverage
+    from gsbench.train.losses import edge_coverage
     a = np.zeros((10, 10), bool)
     a[0, :3] = True                      # 3 % of the pixels
     b = np.zeros((10, 10), bool)

@@ -1,4 +1,4 @@
-"""The CPU losses (methods/losses_cpu.py) against the PyTorch code of losses.py, which stays the reference:
+"""The CPU losses (gsbench/train/losses_cpu.py) against the PyTorch code of losses.py, which stays the reference:
 values and gradients at float32 and float64, the guards' extreme cases, finite differences, the
 dispatch, and results that do not depend on the thread count."""
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from gsbench.methods import losses as L
+from gsbench.train import losses as L
 
 H, W, D = 13, 17, 3
 F64 = torch.float64

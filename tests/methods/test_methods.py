@@ -7,9 +7,9 @@ import torch
 
 from gsbench.gaussians import GaussianField
 from gsbench.methods import Method, get_method
-from gsbench.methods.autoencoder import FeatureAutoencoder, train_autoencoder
 from gsbench.methods.base import removal_mask
-from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, reset_opacity
+from gsbench.train.autoencoder import FeatureAutoencoder, train_autoencoder
+from gsbench.train.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, reset_opacity
 
 
 def test_autoencoder_round_trips_text_aligned_features():
@@ -105,8 +105,8 @@ def test_methods_without_semantics_return_none():
 def test_decoded_features_are_the_same_in_chunks(monkeypatch):
     """Decode mode decodes in row chunks (memory at full size); chunking must not change any pixel."""
     from gsbench.camera import Camera
-    from gsbench.methods import feature_blocks as FB
     from gsbench.render import RenderOutput
+    from gsbench.train import feature_blocks as FB
     m = get_method("gaussiands")()
     m.field = _field(5)
     torch.manual_seed(0)
@@ -126,7 +126,7 @@ def test_decoding_in_chunks_changes_no_bit_at_the_real_sizes():
     """Evaluation decodes a map BLOCK_ROWS pixels at a time for speed; the default autoencoder's
     matrix products must give each row the same bits whatever the rows around it, so the scores do
     not depend on the chunk size (a BLAS that splits the inner sums by row count would fail here)."""
-    from gsbench.methods.feature_blocks import BLOCK_ROWS, FeatureBlocks
+    from gsbench.train.feature_blocks import BLOCK_ROWS, FeatureBlocks
     torch.manual_seed(1)
     ae = FeatureAutoencoder(512, 3)
     z = torch.nn.functional.normalize(torch.randn(3, BLOCK_ROWS + 41, 3), dim=-1)   # 3 blocks, the last partial
@@ -140,7 +140,7 @@ def test_decoding_in_chunks_changes_no_bit_at_the_real_sizes():
 def test_feature_blocks_cover_the_map_once_in_pixel_order():
     """Without a function a map is one block (no copy); with one, blocks of BLOCK_ROWS pixels in order,
     each computed when read, and join() gives the whole (H, W, D) map."""
-    from gsbench.methods.feature_blocks import FeatureBlocks
+    from gsbench.train.feature_blocks import FeatureBlocks
     x = torch.arange(2 * 5 * 3, dtype=torch.float32).reshape(2, 5, 3)
     one = list(FeatureBlocks.of_map(x).blocks())
     assert len(one) == 1 and one[0].data_ptr() == x.data_ptr() and torch.equal(FeatureBlocks.of_map(x).join(), x)

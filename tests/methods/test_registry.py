@@ -147,7 +147,7 @@ CONFIGS = [
 @pytest.mark.parametrize("method", ["vanilla", "twostage", "grouping", "gaussiands"])
 def test_fit_asks_for_the_priors_the_grid_prepares(method, overrides, tiny_scene, tmp_path, monkeypatch):
     """What fit() passes to prepare_priors is what the grid's request says (vanilla: nothing at all)."""
-    import gsbench.methods.common as P  # where fit_priors looks prepare_priors up
+    import gsbench.methods.base as P  # where fit_priors looks prepare_priors up
     from gsbench.camera import training_size
     assert set(registry.METHODS) >= {"vanilla", "twostage", "gaussiands"}
     cache = tmp_path / "cache"
@@ -187,7 +187,7 @@ def test_fit_asks_for_the_priors_the_grid_prepares(method, overrides, tiny_scene
 
 def test_the_grid_entry_is_a_cache_hit_for_fit(tiny_scene, tmp_path):
     """Priors computed from the grid's request are found in the cache by fit_priors."""
-    from gsbench.methods.common import fit_priors
+    from gsbench.methods.base import fit_priors
     from gsbench.priors import prepare_priors
     cfg = load_config("gaussiands", "cpu-small", ["train.max_width=16", f"priors.cache_dir={tmp_path / 'cache'}"])
     req = registry.priors_request(cfg, tiny_scene.path)

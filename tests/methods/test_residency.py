@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from gsbench.cli import main
-from gsbench.methods.residency import HostViews, place
+from gsbench.train.residency import HostViews, place
 
 
 def test_host_views_keep_host_copies_and_hand_out_device_tensors():

@@ -1,4 +1,4 @@
-"""The CPU SSIM loss (methods/ssim_cpu.py) against the PyTorch `ssim_map` and finite differences."""
+"""The CPU SSIM loss (gsbench/train/ssim_cpu.py) against the PyTorch `ssim_map` and finite differences."""
 from __future__ import annotations
 
 import numba
@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from gsbench.methods import losses as L
-from gsbench.methods import ssim_cpu as SC
-from gsbench.methods.ssim_cpu import ssim_mean_cpu
 from gsbench.metrics.ssim_definition import SSIM_C1, SSIM_C2, SSIM_WINDOW
+from gsbench.train import losses as L
+from gsbench.train import ssim_cpu as SC
+from gsbench.train.ssim_cpu import ssim_mean_cpu
 
 
 def _window(dtype=torch.float64):

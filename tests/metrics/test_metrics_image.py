@@ -178,11 +178,11 @@ def test_default_ssim_is_the_3dgs_form(shape):
 
 @pytest.mark.parametrize("shape", [(40, 52, 3), (9, 14, 1), (23, 17), (4, 3, 3)])
 def test_zeropad_metric_map_is_the_training_ssim_map_borders_included(shape):
-    """The metric's default form and the training loss (methods/losses.py, and through `losses.ssim` on
-    the CPU methods/ssim_cpu.py) are one formula with one set of constants (metrics/ssim_definition.py):
+    """The metric's default form and the training loss (gsbench/train/losses.py, and through `losses.ssim` on
+    the CPU gsbench/train/ssim_cpu.py) are one formula with one set of constants (metrics/ssim_definition.py):
     their per-pixel maps agree in float64 everywhere, the 5-px frame the zero padding reaches included
     (shapes below the window size are all frame)."""
-    from gsbench.methods import losses as L
+    from gsbench.train import losses as L
     rng = np.random.default_rng(sum(shape))
     a = rng.random(shape)
     b = np.clip(a + 0.2 * rng.standard_normal(shape), 0, 1)
@@ -198,9 +198,9 @@ def test_zeropad_metric_map_is_the_training_ssim_map_borders_included(shape):
 
 
 def test_ssim_constants_and_window_are_the_one_definition():
-    from gsbench.methods import losses as L
     from gsbench.metrics import ssim_definition as D
     from gsbench.metrics.image import gaussian_window
+    from gsbench.train import losses as L
     assert (D.SSIM_WINDOW, D.SSIM_SIGMA, D.SSIM_C1, D.SSIM_C2) == (11, 1.5, 0.01 ** 2, 0.03 ** 2)
     assert (L.SSIM_C1, L.SSIM_C2) == (D.SSIM_C1, D.SSIM_C2)
     # the training loss computes its taps with torch, the metric with numpy: the same taps to float64 precision

@@ -10,10 +10,10 @@ from sphere_scene import make_sphere_scene
 from gsbench.config import load_config
 from gsbench.datasets import load_scene
 from gsbench.errors import InputError
-from gsbench.methods.losses import EDGE_FLOOR, depth_edges, edge_coverage
 from gsbench.methods.registry import build_priors_request
 from gsbench.priors import depth as D
 from gsbench.priors import prepare_priors
+from gsbench.train.losses import EDGE_FLOOR, depth_edges, edge_coverage
 
 
 def step_depth(width: int, height: int) -> np.ndarray:

@@ -92,7 +92,7 @@ def test_label_masks_one_segment_per_class_component_none_on_unlabelled_views(ov
 def test_unlabelled_views_get_no_semantic_target(ovs_scene):
     """The trainer's L_sem / L_ds average over `has_target` and are skipped for a view without any
     (methods/gaussiands, methods/twostage): an unlabelled view must have no target pixel."""
-    from gsbench.methods.semantic import build_targets, fit_autoencoder
+    from gsbench.train.semantic_targets import build_targets, fit_autoencoder
     s = load_scene(ovs_scene)
     views = [1, 2, 3]
     p = prepare_priors(s, {"masks": {"provider": "gt"}}, views, (32, 24), None, False, True, True, progress=False)

@@ -22,7 +22,7 @@ import gsbench.render.gsplat_ext as G
 from gsbench.config import load_config
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
-from gsbench.methods.common import prebuild_for
+from gsbench.train.render_backend import prebuild_for
 from gsbench.render.gsplat_ext import GsplatStatus
 from paths import REPO_ROOT
 
@@ -203,7 +203,9 @@ def test_a_grid_builds_gsplat_once_before_its_workers_and_only_when_a_cell_uses_
 
 # ---------------------------------------------------------------------------- point 3: resume across kinds
 def _trainer(tmp_path, backend="cpu"):
-    from gsbench.methods.trainer import Trainer, TrainViews, init_field
+    from gsbench.train.trainer import Trainer
+    from gsbench.train.views import TrainViews
+    from gsbench.train.initial_field import init_field
     cfg = load_config("vanilla", "cpu-small", [])
     fld, _ = init_field(None, None, "random", 8, np.zeros(3), 1.0, 0, 0, seed=0)
     return Trainer(cfg, TrainViews({}, {}), 1.0, fld, tmp_path, lambda *a: None, backend=backend)
@@ -290,7 +292,7 @@ def test_doctor_on_a_fake_cuda_machine(fake_cuda, capsys):
 # ---------------------------------------------------------------------------- point 6: the smaller points
 def test_densify_stats_make_no_tensor_from_host_numbers_per_step(monkeypatch):
     """The (W/2, H/2) scale is built once per image size, not every step (a blocking copy on CUDA)."""
-    from gsbench.methods.densify import DensifyStats
+    from gsbench.train.densify import DensifyStats
     stats = DensifyStats(4)
     made = []
     real = torch.tensor
@@ -346,7 +348,7 @@ def test_prior_models_run_on_the_training_device(fake_cuda, tiny_scene, tmp_path
     import gsbench.priors.features as PF
     import gsbench.priors.masks as PM
     from gsbench.datasets import load_scene
-    from gsbench.methods.common import fit_priors
+    from gsbench.methods.base import fit_priors
     from gsbench.priors.pipeline import _compute_masks
     fake_cuda.setattr(PD, "DepthAnything", _Recorder)
     fake_cuda.setattr(PM, "Sam2Masks", _Recorder)

@@ -125,7 +125,7 @@ def test_nonfinite_loss_stops_with_status_and_keeps_checkpoint(scene, tmp_path, 
 
 @pytest.mark.slow
 def test_resume_after_interruption_matches_uninterrupted(scene, tmp_path, monkeypatch):
-    import gsbench.methods.trainer as T
+    import gsbench.train.trainer as T
     cfg = load_config("gaussiands", "cpu-small", TINY + ["train.eval_every=0"])
     ref = train_run(cfg, scene, tmp_path / "ref", progress=False)
     real = fail_render_at(monkeypatch, 17, KeyboardInterrupt())

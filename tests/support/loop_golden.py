@@ -9,11 +9,11 @@ before the harness took over the loop (the methods' own fit() loops), and the ha
 it exactly. It was rewritten, with the loop unchanged, when the cpu rasterizer's arithmetic changed
 (its vectorised exp and pixel sums): vanilla's log then moved by at most 1e-7 relative, and on this
 tiny scene the thresholded semantic metrics moved by up to 0.004 (absolute). It was rewritten again,
-the loop unchanged, when the CPU SSIM loss moved from PyTorch convolutions to methods/ssim_cpu.py
+the loop unchanged, when the CPU SSIM loss moved from PyTorch convolutions to gsbench/train/ssim_cpu.py
 (the same function; its last bits differ): the logged loss totals moved by at most 4e-5 relative,
 PSNR by at most 0.002 dB, and on the tiny scene one of 21 LERF localisations flipped. It was
 rewritten again, the loop unchanged, when the float32 cpu rasterizer took a float32 exponential
-(within 1.01 ulp) and GaussianDS's depth, TV, L_sem and L_ds losses moved to methods/losses_cpu.py
+(within 1.01 ulp) and GaussianDS's depth, TV, L_sem and L_ds losses moved to gsbench/train/losses_cpu.py
 (the same functions, summed in float64): logged losses moved by at most 1.5e-4 relative (TV,
 grouping's reg3d), PSNR by at most 0.0006 dB, SSIM by at most 8e-4 relative, and on the tiny scene
 the thresholded LERF metrics by up to 0.002 mIoU, with one of 42 localisations flipped. It was

@@ -1,4 +1,4 @@
-"""Compile the CPU backend's and the CPU losses' numba kernels (SSIM, methods/losses_cpu.py) for one
+"""Compile the CPU backend's and the CPU losses' numba kernels (SSIM, gsbench/train/losses_cpu.py) for one
 dtype into numba's on-disk cache: `python numba_warmup.py float32`.
 
 Why: on a fresh clone the cache is empty, and every pytest-xdist worker that renders first compiles
@@ -16,8 +16,8 @@ import gsbench  # noqa: F401  (before torch: gsbench's OpenMP settings)
 import torch
 from render_fields import look_at, random_field, with_grad
 
-from gsbench.methods import losses as L
 from gsbench.render import render
+from gsbench.train import losses as L
 
 
 def warm(dtype: torch.dtype) -> None:

@@ -1,7 +1,7 @@
 """A trainer whose render fails at a chosen call: the tests of interrupted and failed runs."""
 from __future__ import annotations
 
-import gsbench.methods.trainer as T
+import gsbench.train.trainer as T
 
 
 def fail_render_at(monkeypatch, call: int, error: BaseException):

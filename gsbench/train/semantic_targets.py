@@ -10,8 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from gsbench.methods.autoencoder import FeatureAutoencoder, train_autoencoder
-from gsbench.methods.residency import DEVICE, place
+from gsbench.train.autoencoder import FeatureAutoencoder, train_autoencoder
+from gsbench.train.residency import DEVICE, place
 
 
 @dataclass
@@ -45,7 +45,7 @@ def semantic_targets(masks: dict, mask_features: dict, ae_cfg: dict, latent_dim:
 def build_targets(masks: dict, mask_features: dict, ae: FeatureAutoencoder, sizes: dict[int, tuple[int, int]],
                   device: torch.device | str = "cpu", on: str = DEVICE) -> SemanticTargets:
     """Per-view latent target maps (built once, then kept on `device`, or on the host with on="host":
-    methods/residency.py). `sizes`: view id -> (W, H)."""
+    gsbench/train/residency.py). `sizes`: view id -> (W, H)."""
     lat, has = {}, {}
     for v, (W, H) in sizes.items():
         m = masks.get(v)

@@ -13,7 +13,7 @@ import torch
 from torch import nn
 
 from gsbench.gaussians import normalize_quats, quat_to_rotmat
-from gsbench.methods.adam import Adam
+from gsbench.train.adam import Adam
 
 
 def inverse_sigmoid(x: torch.Tensor) -> torch.Tensor:

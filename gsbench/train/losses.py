@@ -41,9 +41,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from gsbench.methods import losses_cpu as LC
-from gsbench.methods.ssim_cpu import ssim_mean_cpu
 from gsbench.metrics.ssim_definition import SSIM_C1, SSIM_C2, SSIM_SIGMA, SSIM_TRAIN_DEN_FLOOR, SSIM_WINDOW
+from gsbench.train import losses_cpu as LC
+from gsbench.train.ssim_cpu import ssim_mean_cpu
 
 DEPTH_FORMULATIONS = ("none", "raw_l1", "minmax", "scale_shift", "pearson")
 DEPTH_EPS = 1e-6          # rendered depth below this is "no surface" (not inverted, not used)

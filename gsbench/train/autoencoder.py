@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from gsbench.methods.adam import Adam
+from gsbench.train.adam import Adam
 
 
 def _mlp(dims: Sequence[int]) -> nn.Sequential:

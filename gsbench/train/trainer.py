@@ -33,16 +33,16 @@ import numpy as np
 import torch
 
 from gsbench import rundir
-from gsbench.camera import Camera
 from gsbench.config import setting
 from gsbench.errors import InputError, NonFiniteError
-from gsbench.gaussians import SH_C0, GaussianField
-from gsbench.methods.adam import Adam
-from gsbench.methods.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, inverse_sigmoid, reset_opacity
+from gsbench.gaussians import GaussianField
 from gsbench.render import RenderOutput, render
 from gsbench.render.threads import torch_ops_serial
 from gsbench.step_timers import timed
 from gsbench.store import load_torch
+from gsbench.train.adam import Adam
+from gsbench.train.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, reset_opacity
+from gsbench.train.views import TrainViews
 
 LR_KEYS = {"colors": "color", "opacity_logits": "opacity", "log_scales": "scaling", "quats": "rotation",
            "features": "semantic"}
@@ -66,67 +66,6 @@ class StepResult:
     loss: LossResult
     densify: dict
     lr_position: float
-
-
-@dataclass
-class TrainViews:
-    """Training and periodic-evaluation views at the training resolution."""
-
-    cameras: dict[int, Camera]
-    images: dict[int, torch.Tensor]                   # (H, W, 3) float in [0, 1]
-    eval_cameras: dict[int, Camera] = field(default_factory=dict)
-    eval_images: dict[int, torch.Tensor] = field(default_factory=dict)
-
-
-# ---------------------------------------------------------------------------- initialisation
-def init_field(points: Optional[np.ndarray], colors: Optional[np.ndarray], mode: str, num_random: int,
-               centre: np.ndarray, half_size: float, sh_degree: int, feature_dim: int, seed: int,
-               max_points: Optional[int] = None) -> tuple[GaussianField, str]:
-    """Initial Gaussians from sparse points (colours if given; a seeded subset of at most `max_points`)
-    or uniform in a cube; returns (field, how)."""
-    rng = np.random.default_rng(seed)
-    if mode == "points":
-        if points is None or len(points) == 0:
-            raise InputError("train.init.mode=points but the scene has no sparse points")
-        xyz = np.asarray(points, dtype=np.float64)
-        rgb = (np.asarray(colors, dtype=np.float64) if colors is not None and len(colors) == len(xyz)
-               else np.full((len(xyz), 3), 0.5))
-        how = f"points ({len(xyz)})"
-        if max_points and len(xyz) > int(max_points):
-            keep = np.sort(rng.choice(len(xyz), int(max_points), replace=False))
-            xyz, rgb = xyz[keep], rgb[keep]
-            how = f"points ({len(xyz)} of {len(points)}, seeded subset: train.init.max_points)"
-    elif mode == "random":
-        n = max(1, int(num_random))
-        xyz = centre[None, :] + (rng.random((n, 3)) * 2.0 - 1.0) * half_size
-        rgb = rng.random((n, 3))
-        how = f"random ({n} in a cube of half-size {half_size:.4g})"
-    else:
-        raise ValueError(f"train.init.mode must be points or random here, got {mode!r}")
-    n = len(xyz)
-    # scale = sqrt(mean squared distance to the 3 nearest neighbours) (3DGS)
-    from scipy.spatial import cKDTree
-    k = min(4, n)
-    if k >= 2:
-        d, _ = cKDTree(xyz).query(xyz, k=k)
-        d2 = np.mean(d[:, 1:] ** 2, axis=1)
-        pos = d2[d2 > 0]
-        floor = float(np.median(pos)) * 1e-4 if pos.size else 1e-7
-        d2 = np.maximum(d2, max(floor, 1e-14))
-    else:
-        d2 = np.full(n, (half_size * 0.01) ** 2 if half_size > 0 else 1e-4)
-    log_s = np.log(np.sqrt(d2))[:, None].repeat(3, 1)
-    K = (sh_degree + 1) ** 2
-    sh = np.zeros((n, K, 3))
-    sh[:, 0, :] = (np.clip(rgb, 0, 1) - 0.5) / SH_C0
-    quats = np.zeros((n, 4))
-    quats[:, 0] = 1.0
-    f32 = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
-    feats = None
-    if feature_dim > 0:
-        feats = torch.zeros(n, feature_dim)
-    field_ = GaussianField(f32(xyz), f32(log_s), f32(quats), inverse_sigmoid(torch.full((n,), 0.1)), f32(sh), feats)
-    return field_, how
 
 
 def field_from_params(ps: ParamSet | dict, sh_active: Optional[int] = None) -> GaussianField:
@@ -356,9 +295,21 @@ class Trainer:
         return StepResult(res, info, lr_pos)
 
 
+def make_trainer(config: dict, views: TrainViews, scene, field0: GaussianField, run_dir: Path,
+                 loss_fn: Callable, *, phase: str, backend: str, iterations: Optional[int] = None,
+                 trainable: Optional[set] = None, densify: bool = True,
+                 extra_state: Optional[Callable[[], dict]] = None) -> Trainer:
+    """One optimisation phase with the shared 3DGS recipe and the method's loss, on the views' device:
+    what a method yields to the harness's loop (gsbench.runs.training) from `train_phases`."""
+    dev = next(iter(views.images.values())).device if views.images else torch.device("cpu")
+    return Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase=phase,
+                   iterations=iterations, trainable=trainable, densify=densify, backend=backend,
+                   seed=int(config["seed"]), extra_state=extra_state, device=dev)
+
+
 def load_checkpoint_if_any(run_dir: Path) -> Optional[dict]:
     p = Path(run_dir) / rundir.CHECKPOINT
     return load_torch(p) if p.exists() else None
 
 
-__all__ = ["Trainer", "TrainViews", "LossResult", "StepResult", "init_field", "load_checkpoint_if_any"]
+__all__ = ["Trainer", "LossResult", "StepResult", "make_trainer", "load_checkpoint_if_any"]
