@@ -13,6 +13,7 @@ and the id of the feature provider that embeds text. The harness owns the traini
     m.semantic_features(camera, "encode")     # (H, W, d) S_hat           | "decode": (H, W, 512) decoded
     m.embed_text(["mug"], "encode")           # (Q, d) AE-encoded text     | "decode": (Q, 512) CLIP text
     m.remove("mug", threshold)                # (copy without the Gaussians whose latent cosine > threshold, n_pruned)
+    m.with_field(field)                       # m with another field (the loop's mid-phase evaluation)
 
 `semantic_features` and `embed_text` return the same space per mode, so a consumer takes the cosine of
 the two. Methods without semantics return None from both.
@@ -172,6 +173,15 @@ class Method:
         with torch.no_grad():
             return self.autoencoder.encode(t)
 
+    def with_field(self, field: GaussianField) -> "Method":
+        """This method with another field, everything else shared (config, autoencoder, providers, info):
+        what the training loop's periodic evaluation scores mid-phase, and what removal returns. A subclass
+        whose state depends on the field overrides it. The result shares this method's modules: read it,
+        do not train it."""
+        out = copy.copy(self)
+        out.field = field
+        return out
+
     def remove(self, query: str, threshold: Optional[float] = None) -> tuple["Method", int]:
         """Object removal: a copy without the Gaussians whose latent cosine with the encoded query > threshold."""
         if not self.has_semantics:
@@ -180,8 +190,7 @@ class Method:
         q = self.embed_text([query], "encode")[0]
         fld = self._require_field()
         drop = removal_mask(fld.features, q, thr)
-        out = copy.copy(self)
-        out.field = fld.subset(~drop)
+        out = self.with_field(fld.subset(~drop))
         out.info = dict(self.info, removed_query=query, removal_threshold=thr)
         return out, int(drop.sum())
 

@@ -23,12 +23,11 @@ probability for the best-matching track exceeds `grouping.removal_threshold` (0.
 """
 from __future__ import annotations
 
-import copy
 import logging
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Optional
 
 import numpy as np
 import torch
@@ -43,7 +42,7 @@ from gsbench.train.feature_blocks import FeatureBlocks
 from gsbench.train.initial_field import scene_init
 from gsbench.train.losses import reconstruction_loss
 from gsbench.train.residency import data_on, place
-from gsbench.train.trainer import LossResult, Trainer
+from gsbench.train.trainer import LossFn, LossResult, StepContext, make_trainer
 from gsbench.train.views import load_views
 
 log = logging.getLogger(__name__)
@@ -181,8 +180,7 @@ class GaussianGrouping(Method):
         with torch.no_grad():
             prob = torch.softmax(self.classifier(fld.features), dim=-1)
         drop = (prob[:, sel] > thr).any(-1) if sel else torch.zeros(fld.num, dtype=torch.bool, device=self.device)
-        out = copy.copy(self)
-        out.field = fld.subset(~drop)
+        out = self.with_field(fld.subset(~drop))
         out.info = dict(self.info, removed_query=query, removal_rule=f"class probability > {thr:g}",
                         removal_classes=sel)
         return out, int(drop.sum())
@@ -239,8 +237,7 @@ class GaussianGrouping(Method):
                 opt.load_state_dict(extra["classifier_optimizer"])
                 gen.set_state(extra["reg3d_generator"])
 
-        holder: dict = {"step": int(resumed["step"]) if resumed else 0}
-        loss_fn = self._loss_fn(config, semantic, dim, targets, has_any, holder, gen)
+        loss_fn = self._loss_fn(config, semantic, dim, targets, has_any, gen)
 
         def extra_state() -> dict:
             if self.classifier is None:
@@ -248,10 +245,8 @@ class GaussianGrouping(Method):
             return {"classifier": self.classifier.state_dict(), "classifier_optimizer": opt.state_dict(),
                     "reg3d_generator": gen.get_state()}
 
-        tr = Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase="main",
-                     backend=self._backend, seed=seed, extra_state=extra_state, device=dev, extra_optimizer=opt)
-        holder["trainer"] = tr
-        self.field = yield tr
+        self.field = yield make_trainer(config, views, scene, field0, run_dir, loss_fn, phase="main",
+                                        backend=self._backend, extra_state=extra_state, extra_optimizer=opt)
         if self.classifier is not None:
             self.classifier.eval()
         self.info["n_gaussians"] = self.field.num
@@ -291,17 +286,17 @@ class GaussianGrouping(Method):
         return targets, has_any
 
     def _loss_fn(self, config: dict, semantic: bool, dim: int, targets: Mapping[int, torch.Tensor],
-                 has_any: dict[int, bool], holder: dict, gen: torch.Generator
-                 ) -> Callable[[int, Any, torch.Tensor], LossResult]:
+                 has_any: dict[int, bool], gen: torch.Generator) -> LossFn:
         """The per-step loss (module docstring): L_rec, the identity loss on views with targets, and every
-        `reg3d.interval` steps (counted in `holder["step"]`) the 3D neighbour KL over sampled Gaussians."""
+        `reg3d.interval` steps (the context's step) the 3D neighbour KL over sampled Gaussians (the
+        context's parameters)."""
         g = config["grouping"]
         lam_dssim = float(config["train"]["lambda_dssim"])
         on, lam, r3 = g["losses"], g["lambdas"], g["reg3d"]
 
-        def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
-            holder["step"] += 1
-            rec = reconstruction_loss(out.rgb, gt, lam_dssim)
+        def loss_fn(ctx: StepContext) -> LossResult:
+            vid, out = ctx.view_id, ctx.out
+            rec = reconstruction_loss(out.rgb, ctx.gt, lam_dssim)
             total, terms, weighted, skipped = rec, {"rec": rec.detach()}, {"rec": rec.detach()}, {}
             if semantic and on["identity"]:
                 if not has_any[vid]:
@@ -311,8 +306,8 @@ class GaussianGrouping(Method):
                     w = float(lam["identity"]) * li
                     total = total + w
                     terms["identity"], weighted["identity"] = li.detach(), w.detach()
-            if semantic and on["reg3d"] and holder["step"] % int(r3["interval"]) == 0:
-                p = holder["trainer"].ps.params
+            if semantic and on["reg3d"] and ctx.step % int(r3["interval"]) == 0:
+                p = ctx.params
                 pool, samples = sample_reg3d(int(p["means"].shape[0]), int(r3["max_points"]),
                                              int(r3["sample_size"]), gen)
                 probs = torch.softmax(self.classifier(p["features"][pool]), dim=-1)

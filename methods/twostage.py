@@ -21,7 +21,7 @@ from gsbench.train.initial_field import scene_init
 from gsbench.train.losses import sem_loss
 from gsbench.train.residency import data_on
 from gsbench.train.semantic_targets import semantic_targets
-from gsbench.train.trainer import LossResult, field_from_params, make_trainer
+from gsbench.train.trainer import LossResult, StepContext, field_from_params, make_trainer
 from gsbench.train.views import load_views
 
 
@@ -69,7 +69,8 @@ class TwoStage(Method):
         else:
             sem_field0 = rgb_field.with_features(torch.zeros(rgb_field.num, d, device=rgb_field.means.device))
 
-        def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
+        def loss_fn(ctx: StepContext) -> LossResult:
+            vid, out = ctx.view_id, ctx.out
             if not has_any[vid]:
                 z = out.features.sum() * 0.0
                 return LossResult(z, {"total": z.detach()}, {"sem": 1})

@@ -4,19 +4,17 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
-import torch
-
 from gsbench.methods.base import Method, Phases
 from gsbench.methods.vanilla_spec import budget
 from gsbench.train.initial_field import scene_init
 from gsbench.train.losses import reconstruction_loss
-from gsbench.train.trainer import LossResult, make_trainer
+from gsbench.train.trainer import LossFn, LossResult, StepContext, make_trainer
 from gsbench.train.views import load_views
 
 
-def rgb_loss_fn(lam_dssim: float):
-    def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
-        rec = reconstruction_loss(out.rgb, gt, lam_dssim)
+def rgb_loss_fn(lam_dssim: float) -> LossFn:
+    def loss_fn(ctx: StepContext) -> LossResult:
+        rec = reconstruction_loss(ctx.out.rgb, ctx.gt, lam_dssim)
         v = rec.detach()
         return LossResult(rec, {"rec": v, "total": v}, weighted={"rec": v})
     return loss_fn

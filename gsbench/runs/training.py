@@ -17,7 +17,6 @@ It sends the phase's final field back to the method, which goes on to its next p
 """
 from __future__ import annotations
 
-import copy
 import json
 import logging
 import time
@@ -165,8 +164,7 @@ def _segmentation(method, scene, views, config: dict) -> Optional[Callable[[Gaus
     cams = [views.eval_cameras[i] for i in ids]
 
     def _sem(fld: GaussianField) -> dict:
-        probe = copy.copy(method)
-        probe.field = fld
+        probe = method.with_field(fld)      # the method's own view of this field (Method.with_field)
         if not probe.has_semantics:   # e.g. no latents yet, or no autoencoder yet (twostage's rgb phase)
             return {}
         try:   # build (and cache) the text encoder once, on the real method

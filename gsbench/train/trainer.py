@@ -5,10 +5,13 @@ gsbench/runs/training.py.
 Recipe (3DGS, every number a config value under `train`): Adam with one group per tensor
 (position LR times the scene extent with exponential decay; colour, opacity, scaling, rotation,
 semantic LRs), L_rec = (1 - lambda) L1 + lambda (1 - SSIM), adaptive density control (clone /
-split / prune, opacity reset), initialisation from the scene's sparse points or uniformly at random
-in a cube around the cameras' centroid.
+split / prune, opacity reset: gsbench/train/strategy.py's `DefaultStrategy`, which a method may replace),
+initialisation from the scene's sparse points or uniformly at random in a cube around the cameras'
+centroid (gsbench/train/initial_field.py).
 
-The method supplies extra loss terms through `loss_fn(view_id, out, gt_rgb) -> LossResult`.
+The method supplies its loss as `loss_fn(ctx: StepContext) -> LossResult`: the context holds the step,
+the view id, the render, the ground-truth image and the trainer (its parameters, for a loss on the
+Gaussians themselves).
 Runs are seeded (view order, split sampling, init) and resumable: `Trainer.state()` (written by the
 harness to `checkpoint.pt`) holds parameters, Adam state, densification statistics, RNG states, step
 and elapsed time. A non-finite loss or parameter raises NonFiniteError; the last good checkpoint is kept.
@@ -41,7 +44,8 @@ from gsbench.render.threads import torch_ops_serial
 from gsbench.step_timers import timed
 from gsbench.store import load_torch
 from gsbench.train.adam import Adam
-from gsbench.train.densify import DensifyStats, ParamSet, densify_and_prune, expon_lr, reset_opacity
+from gsbench.train.densify import ParamSet, expon_lr
+from gsbench.train.strategy import Strategy, default_strategy
 from gsbench.train.views import TrainViews
 
 LR_KEYS = {"colors": "color", "opacity_logits": "opacity", "log_scales": "scaling", "quats": "rotation",
@@ -56,6 +60,27 @@ class LossResult:
     skipped: dict[str, torch.Tensor | int] = field(default_factory=dict)     # counted skips, e.g. {"depth": 1}
     weighted: dict[str, torch.Tensor | float] = field(default_factory=dict)  # lambda * term: logged as loss_share
     # Values may be device tensors: the trainer sums them on the device and reads them at log steps only.
+
+
+@dataclass(frozen=True)
+class StepContext:
+    """What a method's loss is given each step: the phase's step (1-based, already counted: the first
+    step is 1), the view rendered, its render output and ground-truth image, and the trainer (read-only
+    use: `params`, its field's tensors as optimised, e.g. for a regulariser on the Gaussians)."""
+
+    step: int
+    view_id: int
+    out: RenderOutput
+    gt: torch.Tensor                  # (H, W, 3) float in [0, 1]
+    trainer: "Trainer"
+
+    @property
+    def params(self) -> dict[str, torch.nn.Parameter]:
+        """The trainable tensors by field attribute name (`means`, `features`, ...), as the step renders them."""
+        return self.trainer.ps.params
+
+
+LossFn = Callable[[StepContext], LossResult]
 
 
 @dataclass
@@ -92,11 +117,11 @@ class Trainer:
     """One optimisation phase (e.g. `main`, or twostage's `rgb` / `semantic`)."""
 
     def __init__(self, cfg: dict, views: TrainViews, extent: float, field: GaussianField, run_dir: Path,
-                 loss_fn: Callable[[int, RenderOutput, torch.Tensor], LossResult], *, phase: str = "main",
+                 loss_fn: LossFn, *, phase: str = "main",
                  iterations: Optional[int] = None, trainable: Optional[set[str]] = None, densify: bool = True,
                  backend: str = "torch", seed: int = 0, extra_state: Optional[Callable[[], dict]] = None,
                  device: Optional[torch.device] = None,
-                 extra_optimizer: Optional[Adam] = None) -> None:
+                 extra_optimizer: Optional[Adam] = None, strategy: Optional[Strategy] = None) -> None:
         self.cfg = cfg
         self.tcfg = cfg["train"]
         self.views = views
@@ -105,7 +130,8 @@ class Trainer:
         self.loss_fn = loss_fn
         self.phase = phase
         self.iterations = int(self.tcfg["iterations"] if iterations is None else iterations)
-        self.densify = bool(densify and self.tcfg["densify"]["enabled"])
+        # densification: the method's own strategy, or 3DGS's (on when `densify` and train.densify.enabled)
+        self.strategy = strategy if strategy is not None else default_strategy(self.tcfg, densify)
         self.backend = backend
         self.seed = int(seed)
         self.extra_state = extra_state
@@ -127,7 +153,6 @@ class Trainer:
         if trainable is not None and "colors" in trainable:
             trainable = set(trainable) | {SH_REST}
         self.ps = ParamSet(tensors, lrs, trainable)
-        self.stats = DensifyStats(self.ps.num, device=self.device)
         self.step = 0
         self.elapsed = 0.0
         self.view_rng = np.random.default_rng(self.seed)
@@ -136,6 +161,7 @@ class Trainer:
         bg = self.tcfg.get("background") or [0.0, 0.0, 0.0]
         self.background = torch.tensor(bg, dtype=torch.float32, device=self.device)
         self.bad_step = torch.zeros((), dtype=torch.long, device=self.device)   # first step with a non-finite loss
+        self.strategy.initialize(self)
 
     # ------------------------------------------------------------------ state
     @property
@@ -145,7 +171,7 @@ class Trainer:
     def state(self) -> dict:
         return {"phase": self.phase, "step": self.step, "elapsed_s": self.elapsed,
                 "params": {k: v.data.cpu() for k, v in self.ps.params.items()},
-                "optimizer": self.ps.optimizer.state_dict(), "densify": self.stats.state_dict(),
+                "optimizer": self.ps.optimizer.state_dict(), "densify": self.strategy.state_dict(),
                 "view_rng": self.view_rng.bit_generator.state, "view_stack": list(self.view_stack),
                 "torch_gen": self.torch_gen.get_state(), "torch_rng": torch.get_rng_state(),
                 "device": str(self.device), "backend": self.backend,
@@ -176,7 +202,7 @@ class Trainer:
         self.ps = ParamSet({k: v.to(self.device) for k, v in st["params"].items()},
                            {k: lrs.get(k, 0.0) for k in st["params"]}, trainable)
         self.ps.optimizer.load_state_dict(st["optimizer"])
-        self.stats.load_state_dict(st["densify"])
+        self.strategy.load_state_dict(st["densify"])
         self.step = int(st["step"])
         self.elapsed = float(st["elapsed_s"])
         self.view_rng.bit_generator.state = st["view_rng"]
@@ -235,18 +261,17 @@ class Trainer:
     # ------------------------------------------------------------------ one step
     def train_iteration(self) -> StepResult:
         """One optimisation step (the harness, gsbench.runs.training, owns the loop around it): the next view,
-        render, the method's loss, backward, densification statistics, Adam, densify / prune and the
-        opacity reset on their schedule. Values stay on the device; a non-finite loss is flagged in
-        `bad_step` and raised by `raise_if_bad` at the loop's next synchronisation point. On the CPU the
-        step's PyTorch ops run on one thread and the render kernels on all (gsbench.render.threads):
-        faster, and the same bits for any thread count."""
+        render, the method's loss (given a `StepContext`), backward, the strategy's statistics, Adam, and
+        the strategy's densify / prune / opacity reset on its schedule. Values stay on the device; a
+        non-finite loss is flagged in `bad_step` and raised by `raise_if_bad` at the loop's next
+        synchronisation point. On the CPU the step's PyTorch ops run on one thread and the render kernels
+        on all (gsbench.render.threads): faster, and the same bits for any thread count."""
         if self.device.type != "cpu":
             return self._iteration()
         with torch_ops_serial():
             return self._iteration()
 
     def _iteration(self) -> StepResult:
-        d = self.tcfg["densify"]
         self.step += 1
         lr_pos = self._update_lr()
         vid = self._next_view()
@@ -255,7 +280,7 @@ class Trainer:
         fld = field_from_params(self.ps, sh_active_degree(self.step - 1, self.sh_max, self.sh_every))
         out = render(fld, cam, backend=self.backend, background=self.background)
         with timed("losses"):
-            res = self.loss_fn(vid, out, gt)
+            res = self.loss_fn(StepContext(self.step, vid, out, gt, self))
         tot = res.total.detach()
         self.bad_step = torch.where((self.bad_step == 0) & ~torch.isfinite(tot),
                                     torch.full_like(self.bad_step, self.step), self.bad_step)
@@ -265,11 +290,7 @@ class Trainer:
         with timed("backward"):
             res.total.backward()
         with torch.no_grad():
-            do_stats = self.densify and self.step < int(d["until_iter"])
-            if do_stats and out.radii is not None:
-                with timed("densify"):
-                    self.stats.update(out.means2d.grad if out.means2d is not None else None, out.radii,
-                                      cam.width, cam.height)
+            self.strategy.step_post_backward(self, out, cam)
             try:
                 with timed("optimiser"):
                     self.ps.optimizer.step()
@@ -280,31 +301,27 @@ class Trainer:
                     raise
                 raise NonFiniteError(f"optimiser step overflowed at step {self.step} (phase {self.phase}): {e}; "
                                      f"{self._kept()}") from None
-            info = {}
-            if self.densify and self.step < int(d["until_iter"]):
-                if self.step > int(d["from_iter"]) and self.step % int(d["interval"]) == 0:
-                    self.raise_if_bad()      # never densify from non-finite values
-                    reset_int = int(d["opacity_reset_interval"])
-                    with timed("densify"):
-                        info = densify_and_prune(self.ps, self.stats, d, self.extent,
-                                                 prune_big=self.step > reset_int, generator=self.torch_gen)
-                if int(d["opacity_reset_interval"]) > 0 and self.step % int(d["opacity_reset_interval"]) == 0:
-                    with timed("densify"):
-                        reset_opacity(self.ps)
-                    info["opacity_reset"] = True
+            info = self.strategy.step_post_optimizer(self)
         return StepResult(res, info, lr_pos)
 
 
 def make_trainer(config: dict, views: TrainViews, scene, field0: GaussianField, run_dir: Path,
-                 loss_fn: Callable, *, phase: str, backend: str, iterations: Optional[int] = None,
+                 loss_fn: LossFn, *, phase: str, backend: str, iterations: Optional[int] = None,
                  trainable: Optional[set] = None, densify: bool = True,
-                 extra_state: Optional[Callable[[], dict]] = None) -> Trainer:
+                 extra_state: Optional[Callable[[], dict]] = None, extra_optimizer: Optional[Adam] = None,
+                 strategy: Optional[Strategy] = None) -> Trainer:
     """One optimisation phase with the shared 3DGS recipe and the method's loss, on the views' device:
-    what a method yields to the harness's loop (gsbench.runs.training) from `train_phases`."""
+    what a method yields to the harness's loop (gsbench.runs.training) from `train_phases`.
+
+    `trainable`: the field tensors optimised (None: all); `densify=False` or a `strategy` of the method's
+    own replaces 3DGS's density control (gsbench/train/strategy.py); `extra_optimizer` steps a module of
+    the method's own from the same backward pass (its state belongs in `extra_state`, which the
+    checkpoint holds as `extra`)."""
     dev = next(iter(views.images.values())).device if views.images else torch.device("cpu")
     return Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase=phase,
                    iterations=iterations, trainable=trainable, densify=densify, backend=backend,
-                   seed=int(config["seed"]), extra_state=extra_state, device=dev)
+                   seed=int(config["seed"]), extra_state=extra_state, device=dev, extra_optimizer=extra_optimizer,
+                   strategy=strategy)
 
 
 def load_checkpoint_if_any(run_dir: Path) -> Optional[dict]:
@@ -312,4 +329,4 @@ def load_checkpoint_if_any(run_dir: Path) -> Optional[dict]:
     return load_torch(p) if p.exists() else None
 
 
-__all__ = ["Trainer", "LossResult", "StepResult", "make_trainer", "load_checkpoint_if_any"]
+__all__ = ["Trainer", "LossResult", "LossFn", "StepContext", "StepResult", "make_trainer", "load_checkpoint_if_any"]

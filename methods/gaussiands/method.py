@@ -14,24 +14,32 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Optional
 
 import numpy as np
 import torch
 
+from gsbench.config import setting
 from gsbench.methods.base import Method, Phases, fit_priors
+from gsbench.methods.gaussiands.spec import budget
 from gsbench.methods.registry import uses
 from gsbench.train.initial_field import scene_init
-from gsbench.train.trainer import make_trainer
-from gsbench.train.views import load_views
-
-from gsbench.train.losses import (EDGE_FLOOR, depth_edges, depth_loss, ds_loss, edge_coverage,  # isort: skip
-                                    expected_depth, normalised_depth, reconstruction_loss, sem_loss, tv_loss)
-from gsbench.config import setting
-from gsbench.methods.gaussiands.spec import budget
+from gsbench.train.losses import (
+    EDGE_FLOOR,
+    depth_edges,
+    depth_loss,
+    ds_loss,
+    edge_coverage,
+    expected_depth,
+    normalised_depth,
+    reconstruction_loss,
+    sem_loss,
+    tv_loss,
+)
 from gsbench.train.residency import data_on, place
 from gsbench.train.semantic_targets import semantic_targets
-from gsbench.train.trainer import LossResult
+from gsbench.train.trainer import LossFn, LossResult, StepContext, make_trainer
+from gsbench.train.views import load_views
 
 log = logging.getLogger(__name__)
 
@@ -123,9 +131,9 @@ def _device_depth_prior(depth: Optional[dict], train_ids: list[int], dev, config
 
 
 def gaussiands_loss(config: dict, dprior: dict, targets, has_any: dict[int, bool],
-                    edges: dict) -> Callable[[int, Any, torch.Tensor], LossResult]:
+                    edges: dict) -> LossFn:
     """The per-step loss L = L_rec + the switched-on weighted terms (module docstring), as the trainer calls
-    it: (view id, render output, ground-truth image) -> LossResult."""
+    it: StepContext (view id, render output, ground-truth image) -> LossResult."""
     g = config["gaussiands"]
     lam = g["lambdas"]
     on = g["losses"]
@@ -135,10 +143,11 @@ def gaussiands_loss(config: dict, dprior: dict, targets, has_any: dict[int, bool
     tv_eps = float(g["tv_eps"])
     ds_average = str(setting(config, "gaussiands.ds_average"))
 
-    def loss_fn(vid: int, out, gt: torch.Tensor) -> LossResult:
+    def loss_fn(ctx: StepContext) -> LossResult:
         # every value stays on the device: no host synchronisation per step (the trainer reads
         # terms, weighted terms and skip counts at log steps only)
-        rec = reconstruction_loss(out.rgb, gt, lam_dssim)
+        vid, out = ctx.view_id, ctx.out
+        rec = reconstruction_loss(out.rgb, ctx.gt, lam_dssim)
         total = rec
         terms = {"rec": rec.detach()}
         weighted = {"rec": rec.detach()}

@@ -331,7 +331,8 @@ def test_the_engine_imports_no_method():
     engine, never the other way (a method's own parts reach the engine as arguments: its loss, its
     strategy, its extra optimiser)."""
     bad = sorted(f"{i.path.relative_to(ROOT)}:{i.line}: {i.source} imports {t}" for i in imports()
-                 for t in _imported(i.target) if part_of(i.source) == "gsbench.train" and part_of(t) == "gsbench.methods")
+                 for t in _imported(i.target)
+                 if part_of(i.source) == "gsbench.train" and part_of(t) == "gsbench.methods")
     assert not bad, "the engine imports a method module:\n" + "\n".join(bad)
 
 

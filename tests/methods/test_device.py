@@ -49,7 +49,8 @@ def test_backend_for_cuda_device_without_gsplat_warns_once(monkeypatch, caplog):
 
 
 def test_methods_and_render_take_the_one_backend_rule(monkeypatch):
-    """A config's backend (gsbench/train/render_backend.py) and render()'s `auto` are gsbench.render's rule, not copies."""
+    """A config's backend (gsbench/train/render_backend.py) and render()'s `auto` are gsbench.render's rule,
+    not copies."""
     import gsbench.render.backend_choice as D
     from gsbench.config import load_config
     from gsbench.render import render
