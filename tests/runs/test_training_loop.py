@@ -11,6 +11,8 @@ from gsbench.runs import training
 
 def _semantic_stub(has_semantics: bool = True):
     method = SimpleNamespace(autoencoder=object(), has_semantics=has_semantics, feature_provider=lambda: None)
+    # Method.with_field: the method with another field, itself left as it was
+    method.with_field = lambda fld: SimpleNamespace(**{**vars(method), "field": fld})
     scene = SimpleNamespace(has_semantics=True, has_labels=False)
     views = SimpleNamespace(eval_cameras={3: "cam3", 1: "cam1"})
     field = SimpleNamespace(features=torch.zeros(2, 3))
