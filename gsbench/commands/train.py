@@ -40,8 +40,8 @@ def preset_hint(preset: str | None, scene: Path) -> str | None:
     if preset not in SYNTHETIC_PRESETS or not scene.is_dir() or (scene / SYNTHETIC_META).exists():
         return None
     return (f"--preset {preset} is tuned for gsbench's generated scenes; on a real capture like {scene} it "
-            f"stops well short of convergence: --preset {REAL_PRESET} converges on real photos on a CPU "
-            f"(docs/real-captures.md)")
+            f"stops well short of convergence: --preset {REAL_PRESET} trains four times as long for real photos "
+            f"on a CPU (docs/real-captures.md)")
 
 
 def run(args: argparse.Namespace) -> int:
