@@ -116,10 +116,10 @@ def _run(args, work: Path) -> int:
 
     from gsbench.datasets import load_scene
     from gsbench.datasets.synthetic import make_scene
+    from gsbench.evaluation.trained_run import load_run
     from gsbench.methods.base import fit_priors
     from gsbench.runs import train_run
     from gsbench.train.views import load_views
-    from gsbench.trained_run import load_run
     W, H = args.size
     width = args.train_width or W
     ph = Phases()

@@ -13,12 +13,12 @@ from gsbench import rundir
 from gsbench.datasets.splits import split_record
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError
+from gsbench.evaluation.trained_run import load_run
 from gsbench.metric_table import ORDERING_METRICS, SEG_BASES, seg_metric
 from gsbench.metrics import ordering as MO
 from gsbench.results import run_results
 from gsbench.runlock import RunLock
 from gsbench.store import read_json, write_json_atomic
-from gsbench.trained_run import load_run
 
 from .block import Block
 from .depth import depth_metrics

@@ -1,7 +1,7 @@
 """Run folders: train a method into one (resumable, idempotent).
 
     run_dir = train_run(config, scene_path, run_dir)      # config from gsbench.config.load_config
-    method, config, scene = load_run(run_dir)             # gsbench.trained_run: the folder read back
+    method, config, scene = load_run(run_dir)             # gsbench.evaluation.trained_run: the folder read back
 
 Files (see gsbench/store.py): config.json (resolved: scene, run_id, dropped), env.json, status.json,
 train_log.jsonl, checkpoint.pt (trainer state, for resume), model.pt (the trained Method),

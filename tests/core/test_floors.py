@@ -58,7 +58,6 @@ FLOORS: dict[str, int] = {
     # test_the_engine_imports_no_method)
     "gsbench.train": 2,
     "gsbench.methods": 2,
-    "gsbench.trained_run": 2,      # load_run: a finished run folder read back (evaluation reads it)
     # 3: what runs and scores methods
     "gsbench.evaluation": 3,
     "gsbench.runs": 3,

@@ -58,8 +58,8 @@ def test_render_once_gives_the_same_metrics(tmp_path):
     from gsbench.evaluation import evaluate_run
     from gsbench.evaluation.frames import frame_sets
     from gsbench.evaluation.segmentation import resolve_protocols, segmentation
+    from gsbench.evaluation.trained_run import load_run
     from gsbench.runs import train_run
-    from gsbench.trained_run import load_run
     scene_dir = make_scene("tabletop-small", tmp_path / "s", seed=0, views=8, resolution=(40, 30))
     cfg = load_config("gaussiands", "cpu-small", TINY)
     run = train_run(cfg, scene_dir, tmp_path / "run", progress=False)

@@ -48,7 +48,7 @@ def test_sh3_run_logs_bands_and_rest_lr(scene, tmp_path):
     assert float(ck["params"]["colors_rest"].abs().sum()) > 0      # bands 1..2 were trained
     s = read_json(run / "train_summary.json")
     assert s["info"]["budget"] == {"rgb_steps": 12, "semantic_steps": 0, "schedule": "none"}
-    from gsbench.trained_run import load_run
+    from gsbench.evaluation.trained_run import load_run
     m, _, sc = load_run(run)
     assert m.field.sh_degree == 3 and m.device.type in ("cpu", "cuda")
 

@@ -161,7 +161,7 @@ def test_sigint_then_sigkill_then_resume_gives_a_complete_run(workspace, tmp_pat
     assert all(np.isfinite(r["loss"]["total"]) for r in rows)
 
     # the finished run loads and evaluates into a valid results.json
-    from gsbench.trained_run import load_run
+    from gsbench.evaluation.trained_run import load_run
     method, cfg, _ = load_run(run)
     assert cfg["run_id"] == run_id and method.field.num > 0
     assert main(["eval", str(run), "--no-progress"]) == 0    # in-process: the run, not the CLI start, is under test

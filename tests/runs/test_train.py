@@ -9,7 +9,7 @@ from gsbench.config import load_config
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.runs import train_run
 from gsbench.store import load_torch, read_json, read_jsonl
-from gsbench.trained_run import load_run
+from gsbench.evaluation.trained_run import load_run
 
 TINY = ["backend=cpu", "train.iterations=30", "train.max_width=32", "train.eval_every=15", "train.log_every=5",
         "train.checkpoint_every=10", "train.eval_views=1", "train.densify.from_iter=5", "train.densify.interval=10",

@@ -1,9 +1,9 @@
 """A finished run folder read back: `load_run(run_dir) -> (trained Method, resolved config, Scene)`.
 
-Why its own module, below gsbench.runs and gsbench.evaluation (floor 2): the evaluation loads the
-run it scores, and the training loop (gsbench.runs.training) scores with the evaluation's scorer. With
-load_run in gsbench.runs the two packages imported each other. Here, below both, the imports go one
-way: runs -> evaluation -> trained_run. It needs only the method's own loader (Method.load), the
+Why here, in gsbench.evaluation and not gsbench.runs: the evaluation loads the run it scores, and the
+training loop (gsbench.runs.training) scores with the evaluation's scorer. With load_run in
+gsbench.runs the two packages imported each other; here the imports go one way, runs -> evaluation.
+It needs only the method's own loader (Method.load), the
 scene loader and the run folder's names (gsbench.rundir).
 """
 from __future__ import annotations
