@@ -297,25 +297,20 @@ class GaussianGrouping(Method):
         def loss_fn(ctx: StepContext) -> LossResult:
             vid, out = ctx.view_id, ctx.out
             rec = reconstruction_loss(out.rgb, ctx.gt, lam_dssim)
-            total, terms, weighted, skipped = rec, {"rec": rec.detach()}, {"rec": rec.detach()}, {}
+            res = LossResult(rec, {"rec": rec.detach()}, {}, {"rec": rec.detach()})
             if semantic and on["identity"]:
                 if not has_any[vid]:
-                    skipped["identity"] = 1
+                    res.skipped["identity"] = 1
                 else:
-                    li = identity_loss(self.classifier(out.features.reshape(-1, dim)), targets[vid])
-                    w = float(lam["identity"]) * li
-                    total = total + w
-                    terms["identity"], weighted["identity"] = li.detach(), w.detach()
+                    res.add("identity", lam["identity"],
+                            identity_loss(self.classifier(out.features.reshape(-1, dim)), targets[vid]))
             if semantic and on["reg3d"] and ctx.step % int(r3["interval"]) == 0:
                 p = ctx.params
                 pool, samples = sample_reg3d(int(p["means"].shape[0]), int(r3["max_points"]),
                                              int(r3["sample_size"]), gen)
                 probs = torch.softmax(self.classifier(p["features"][pool]), dim=-1)
-                l3 = neighbour_kl(p["means"].detach()[pool], probs, int(r3["k"]), samples)
-                w = float(lam["reg3d"]) * l3
-                total = total + w
-                terms["reg3d"], weighted["reg3d"] = l3.detach(), w.detach()
-            terms["total"] = total.detach()
-            return LossResult(total, terms, skipped, weighted)
+                res.add("reg3d", lam["reg3d"], neighbour_kl(p["means"].detach()[pool], probs, int(r3["k"]), samples))
+            res.terms["total"] = res.total.detach()
+            return res
 
         return loss_fn

@@ -61,6 +61,12 @@ class LossResult:
     weighted: dict[str, torch.Tensor | float] = field(default_factory=dict)  # lambda * term: logged as loss_share
     # Values may be device tensors: the trainer sums them on the device and reads them at log steps only.
 
+    def add(self, name: str, weight: float, term: torch.Tensor) -> None:
+        """Add `weight * term` to the total, logging the term and its weighted value under `name`."""
+        w = float(weight) * term
+        self.total = self.total + w
+        self.terms[name], self.weighted[name] = term.detach(), w.detach()
+
 
 @dataclass(frozen=True)
 class StepContext:

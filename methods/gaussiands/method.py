@@ -148,10 +148,7 @@ def gaussiands_loss(config: dict, dprior: dict, targets, has_any: dict[int, bool
         # terms, weighted terms and skip counts at log steps only)
         vid, out = ctx.view_id, ctx.out
         rec = reconstruction_loss(out.rgb, ctx.gt, lam_dssim)
-        total = rec
-        terms = {"rec": rec.detach()}
-        weighted = {"rec": rec.detach()}
-        skipped = {}
+        res = LossResult(rec, {"rec": rec.detach()}, {}, {"rec": rec.detach()})
         if (on["depth"] and dprior) or on["tv"]:
             dn = normalised_depth(out.depth, out.alpha)     # scale-free: lambdas mean the same on every scene
         if on["depth"] and dprior:
@@ -160,34 +157,23 @@ def gaussiands_loss(config: dict, dprior: dict, targets, has_any: dict[int, bool
             # 1 / D confounds coverage with depth (losses.expected_depth)
             dt = depth_loss(form, expected_depth(dn, out.alpha), vals, valid, kind, min_valid)
             if dt.loss is not None:
-                w = float(lam["depth"]) * dt.loss
-                total = total + w
-                terms["depth"], weighted["depth"] = dt.loss.detach(), w.detach()
-                skipped["depth"] = (~dt.ok).long()
+                res.add("depth", lam["depth"], dt.loss)
+                res.skipped["depth"] = (~dt.ok).long()
         if on["tv"]:
-            tv = tv_loss(dn, tv_eps)
-            w = float(lam["tv"]) * tv
-            total = total + w
-            terms["tv"], weighted["tv"] = tv.detach(), w.detach()
+            res.add("tv", lam["tv"], tv_loss(dn, tv_eps))
         if targets is not None and out.features is not None:
             S, has = targets.latents[vid], targets.has_target[vid]
             if on["sem"]:
                 if not has_any[vid]:
-                    skipped["sem"] = 1
+                    res.skipped["sem"] = 1
                 else:
-                    ls = sem_loss(out.features, S, has)
-                    w = float(lam["sem"]) * ls
-                    total = total + w
-                    terms["sem"], weighted["sem"] = ls.detach(), w.detach()
+                    res.add("sem", lam["sem"], sem_loss(out.features, S, has))
             if on["ds"] and vid in edges:
                 if not has_any[vid]:
-                    skipped["ds"] = 1
+                    res.skipped["ds"] = 1
                 else:
-                    ld = ds_loss(out.features, S, has, edges[vid], ds_average)
-                    w = float(lam["ds"]) * ld
-                    total = total + w
-                    terms["ds"], weighted["ds"] = ld.detach(), w.detach()
-        terms["total"] = total.detach()
-        return LossResult(total, terms, skipped, weighted)
+                    res.add("ds", lam["ds"], ds_loss(out.features, S, has, edges[vid], ds_average))
+        res.terms["total"] = res.total.detach()
+        return res
 
     return loss_fn
