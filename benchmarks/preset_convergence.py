@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from gsbench.config import load_config
+from gsbench.config import load_config, setting
 
 #: the step counts of a schedule, scaled together by --factor
 SCHEDULE_KEYS = ("train.iterations", "train.lr.position_max_steps", "train.densify.from_iter",
@@ -31,16 +31,10 @@ SCHEDULE_KEYS = ("train.iterations", "train.lr.position_max_steps", "train.densi
                  "train.sh_increase_every", "train.eval_every", "train.checkpoint_every", "train.log_every")
 
 
-def _get(cfg: dict, key: str):
-    for part in key.split("."):
-        cfg = cfg[part]
-    return cfg
-
-
 def scaled_schedule(method: str, preset: str, factor: int, sets: list[str]) -> list[str]:
     """`--set` overrides that run `preset` `factor` times longer (every step count times factor)."""
     cfg = load_config(method, preset, sets)
-    return [f"{k}={int(_get(cfg, k)) * factor}" for k in SCHEDULE_KEYS if _get(cfg, k) is not None]
+    return [f"{k}={int(setting(cfg, k)) * factor}" for k in SCHEDULE_KEYS if setting(cfg, k) is not None]
 
 
 def train_and_eval(scene: Path, method: str, preset: str, sets: list[str], run: Path) -> dict:
