@@ -62,7 +62,7 @@ def _config(method: str, n: int, w: int, device: torch.device, iters: int, log_e
         f"train.device={device}", "backend=auto", f"train.iterations={iters}", f"train.max_width={w}",
         "train.densify.enabled=false", "train.init.mode=random", f"train.init.num_random={n}",
         "train.eval_every=0", "train.checkpoint_every=0", f"train.log_every={log_every}",
-        "gaussiands.autoencoder.epochs=20", f"priors.cache_dir={root / 'cache'}"])
+        "semantic.autoencoder.epochs=20", f"priors.cache_dir={root / 'cache'}"])
 
 
 def reference_its(n: int, w: int, h: int, device: torch.device, iters: int, root: Path) -> tuple[float, str]:

@@ -31,7 +31,7 @@ from typing import Any
 import pandas as pd
 
 from gsbench import rundir
-from gsbench.config import config_key
+from gsbench.config import config_key, upgrade_config, upgrade_key
 from gsbench.errors import InputError
 from gsbench.metric_table import KNOWN_METRICS
 from gsbench.results import check_shape
@@ -203,6 +203,16 @@ def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
     return rows
 
 
+def upgraded_results(res: Any) -> Any:
+    """A results.json written before a method moved keys, read in today's layout (its config and its grid
+    axis keys: gsbench.config.upgrade_config), so old runs sit in the same columns as new ones."""
+    if not isinstance(res, dict) or upgrade_config(res.get("config")) is res.get("config"):
+        return res
+    grid = res.get("grid")
+    grid = {upgrade_key(str(k)): v for k, v in grid.items()} if isinstance(grid, dict) else grid
+    return {**res, "config": upgrade_config(res["config"]), "grid": grid}
+
+
 def _unreadable_row(path: Path, error: str) -> dict:
     """The row of a run whose results.json cannot be read: status "failed", the error as reason.
 
@@ -262,7 +272,7 @@ def collect(runs_dir: str | Path) -> pd.DataFrame:
             if run_id is not None and run_id in seen:
                 warnings.append(f"{p}: run_id {run_id} already read from {seen[run_id]}; duplicate ignored")
                 continue
-            rows.extend(_rows_for(p, res, KNOWN_METRICS))
+            rows.extend(_rows_for(p, upgraded_results(res), KNOWN_METRICS))
         except InputError as e:  # one bad file never hides the other runs: it becomes a failed row
             unreadable.append(str(e))
             warnings.append(f"could not read {e}")

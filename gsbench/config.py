@@ -29,7 +29,7 @@ import yaml
 
 from gsbench.config_keys import FREE_MAPPINGS, METHODS, RULES, Rule
 from gsbench.errors import InputError
-from gsbench.method_table import get_spec, section_defaults
+from gsbench.method_table import SHARED_SECTIONS, get_spec, method_rules, moved_keys, section_defaults
 from gsbench.store import read_text_bounded
 
 CONFIG_DIR = Path(__file__).parent / "configs"
@@ -39,7 +39,7 @@ CONFIG_DIR = Path(__file__).parent / "configs"
 NON_RESULT_KEYS = (("priors", "cache_dir"), ("train", "data_on"))
 # keys added after run folders were stored: left out of the hash while they hold their null default,
 # so the run ids (and config keys) of configs that do not set them stay what they were
-NULL_DEFAULT_KEYS = (("train", "views"), ("gaussiands", "edges", "size"))
+NULL_DEFAULT_KEYS = (("train", "views"),)
 _NO_DEFAULT = object()
 
 
@@ -225,13 +225,16 @@ def set_args(groups: Iterable[Iterable[str]] | None) -> list[str]:
 
 
 def _unknown_key(key: str, leaves: Mapping[str, Any], where: str) -> InputError:
+    if upgrade_key(key) != key and upgrade_key(key) in leaves:
+        return InputError(f"{where}: config key {short_repr(key)} has moved: it is {upgrade_key(key)} now")
     section = [k for k in leaves if k.startswith(key + ".")]
     if section:
         return InputError(f"{where}: unknown config key {short_repr(key)} (a section; set one of its keys, "
                           f"e.g. {section[0]})")
     close = difflib.get_close_matches(key, list(leaves), n=3, cutoff=0.5) if len(key) <= 200 else []
     hint = f"; did you mean {', '.join(close)}?" if close else ""
-    return InputError(f"{where}: unknown config key {short_repr(key)} (not in gsbench/configs/default.yaml){hint}")
+    return InputError(f"{where}: unknown config key {short_repr(key)} "
+                      f"(not in gsbench/configs/default.yaml nor a method's section){hint}")
 
 
 _KINDS = ((bool, "bool"), (int, "int"), (float, "float"), (str, "str"), (list, "list"), (dict, "dict"))  # bool first
@@ -254,7 +257,7 @@ def check_value(key: str, value: Any, leaves: Mapping[str, Any], where: str) -> 
     default = leaves.get(key, _NO_DEFAULT)
     if default is _NO_DEFAULT:
         raise _unknown_key(key, leaves, where)
-    rule = RULES.get(key)
+    rule = RULES.get(key) or method_rules().get(key)
     return _checked(key, value, _kind(default, rule), rule, default, where)
 
 
@@ -388,13 +391,53 @@ def run_config(data: Any, path: str | Path) -> dict:
     sections = [k for k, v in _default_tree().items() if isinstance(v, dict) and not isinstance(data.get(k, {}), dict)]
     if sections:
         raise InputError(f"{path}: section {sections[0]!r} must be a mapping")
-    return data
+    return upgrade_config(data)
+
+
+def upgrade_key(key: str) -> str:
+    """A dotted key (or dropped part) that a method moved (MethodSpec.moved), in today's layout; any other
+    key as it is."""
+    for old, new in moved_keys().items():
+        if key == old or key.startswith(old + "."):
+            return new + key[len(old):]
+    return key
+
+
+def upgrade_config(cfg: Any) -> Any:
+    """A config written before a method moved some of its keys (MethodSpec.moved: e.g. d and the
+    autoencoder, once GaussianDS's, now the shared `semantic` section) in today's layout, as a copy; any
+    other value as it is. Old run folders and published cells stay readable; their run ids are the old
+    layout's (docs/config.md, "Layouts")."""
+    moved = [(old, new) for old, new in moved_keys().items() if _has_key(cfg, old)]
+    if not moved:
+        return cfg
+    c = copy.deepcopy(cfg)
+    for old, new in moved:
+        *parents, leaf = old.split(".")
+        set_dotted(c, new, get_dotted(c, ".".join(parents)).pop(leaf) if parents else c.pop(leaf))
+    for part in ("dropped", "grid"):       # {dotted part or axis key: ...}
+        if isinstance(c.get(part), dict):
+            c[part] = {upgrade_key(str(k)): v for k, v in c[part].items()}
+    for key, default in _default_leaves().items():
+        # a key added since, with a null default (the behaviour before it existed): stated, as today's configs do
+        if default is None and not _has_key(c, key) and isinstance(c.get(key.split(".")[0]), dict):
+            set_dotted(c, key, None)
+    return c
+
+
+def _has_key(cfg: Any, key: str) -> bool:
+    try:
+        get_dotted(cfg, key)
+        return True
+    except KeyError:
+        return False
 
 
 def canonical(cfg: dict) -> dict:
     """The config as far as it decides what a run computes: without the keys that only say where things
     are kept (NON_RESULT_KEYS), without the NULL_DEFAULT_KEYS left null, without bookkeeping (dropped,
-    resolved, scene, run_id) and without another method's own section. The one form both hashes below read."""
+    resolved, scene, run_id), without another method's own section and without the shared sections its
+    method does not read. The one form both hashes below read."""
     c = copy.deepcopy(cfg)
     for path in NON_RESULT_KEYS:
         d = c
@@ -412,9 +455,12 @@ def canonical(cfg: dict) -> dict:
         c.pop(k, None)
     # another method's own section (a plugin's) does not change this run: an installed plugin leaves
     # the run ids of every other method as they were
-    own = get_spec(c["method"]).section if c.get("method") in METHODS else None
+    spec = get_spec(c["method"]) if c.get("method") in METHODS else None
     for section in section_defaults():
-        if section != own:
+        if spec is None or section != spec.section:
+            c.pop(section, None)
+    for section in SHARED_SECTIONS:
+        if spec is None or section not in spec.shared:
             c.pop(section, None)
     return c
 
@@ -441,6 +487,8 @@ __all__ = [
     "setting",
     "config_key",
     "canonical",
+    "upgrade_config",
+    "upgrade_key",
     "parse_overrides",
     "apply_overrides",
     "check_value",

@@ -1,8 +1,9 @@
-"""The one declaration of what each config key accepts, beyond the type its default has.
+"""What each key of default.yaml accepts, beyond the type its default has.
 
 A key's type comes from gsbench/configs/default.yaml (a bool default takes only true/false, a
 number default only numbers, ...). This table adds ranges and choices, and the type of keys whose
-default is null. A key of default.yaml without a rule here is type-checked only. The choices are
+default is null. A key of default.yaml without a rule here is type-checked only. A method's own
+section is not here: its spec declares its defaults and rules (gsbench.method_table.MethodSpec). The choices are
 spelled out here (not imported) so that reading a config imports no method, renderer or model library
 (this module is on the ground floor, docs/architecture.md); tests/core/test_config.py checks that they
 agree with the code that consumes them. The method names are read live from gsbench.method_table.
@@ -97,8 +98,6 @@ NEW_OBJECT_RULES = ("uncarried", "unmatched")
 ORDERINGS = ("pose", "random", "filename")
 NOISE_TYPES = (None, "gaussian", "poisson", "motion_blur", "salt_pepper")
 NOISE_SEVERITIES = (0, 1, 2, 3, 4, 5)
-DEPTH_FORMULATIONS = ("none", "raw_l1", "minmax", "scale_shift", "pearson")
-DS_AVERAGES = ("pixels", "edges")
 INIT_MODES = ("auto", "points", "random", "frustum")
 QUERY_MODES = ("encode", "decode")
 PROTOCOLS = ("auto", "lerf", "3dovs")
@@ -172,35 +171,11 @@ RULES: dict[str, Rule] = {
     "priors.features.checkpoint": Rule(kind="str"),
     "priors.features.noise": at_least(0),
     "priors.features.context": unit(),
-    # GaussianDS
-    "gaussiands.latent_dim": at_least(1),
-    "gaussiands.autoencoder.hidden": list_of(Rule(low=1, high=8192, kind="int", integer=True), 0, 16),
-    "gaussiands.autoencoder.epochs": at_least(0),
-    "gaussiands.autoencoder.lr": positive(),
-    "gaussiands.depth_formulation": one_of(*DEPTH_FORMULATIONS),
-    "gaussiands.ds_average": one_of(*DS_AVERAGES),
-    "gaussiands.lambdas.depth": at_least(0),
-    "gaussiands.lambdas.tv": at_least(0),
-    "gaussiands.lambdas.sem": at_least(0),
-    "gaussiands.lambdas.ds": at_least(0),
-    "gaussiands.tv_eps": positive(),
-    "gaussiands.edges.canny_low": at_least(0),
-    "gaussiands.edges.canny_high": at_least(0),
-    "gaussiands.edges.dilate": at_least(0),
-    "gaussiands.edges.size": at_least(8, kind="int", integer=True),   # null = Canny at the training size
-    "gaussiands.min_valid_pixels": at_least(1),
-    "twostage.semantic_iterations": at_least(1, kind="int", integer=True),  # null = train.iterations
-    # Gaussian Grouping-style baseline
-    "grouping.identity_dim": at_least(1),
-    "grouping.num_classes": at_least(2, integer=True, nullable=True),  # null = tracks + 1
-    "grouping.classifier_lr": positive(),
-    "grouping.lambdas.identity": at_least(0),
-    "grouping.lambdas.reg3d": at_least(0),
-    "grouping.reg3d.interval": at_least(1),
-    "grouping.reg3d.k": at_least(1),
-    "grouping.reg3d.sample_size": at_least(1),
-    "grouping.reg3d.max_points": at_least(1),
-    "grouping.removal_threshold": unit(),
+    # the shared semantic section (methods that learn latents; a method's own section: its spec's rules)
+    "semantic.latent_dim": at_least(1),
+    "semantic.autoencoder.hidden": list_of(Rule(low=1, high=8192, kind="int", integer=True), 0, 16),
+    "semantic.autoencoder.epochs": at_least(0),
+    "semantic.autoencoder.lr": positive(),
     # queries and evaluation
     "query.mode": one_of(*QUERY_MODES),
     "removal.threshold": Rule(low=-1.0, high=1.0),

@@ -3,11 +3,15 @@
 A method is one file plus a spec beside it (docs/methods.md). The spec module holds a `MethodSpec`
 named `SPEC`: data that names the method's class, its resolver (what to switch off when the scene
 cannot feed the method, with reasons), its `uses` rule and its budget rule as "module:function"
-strings, imported only when a method is resolved or run. This table loads the spec modules by name
-on first use: the built-ins of BUILTIN_SPECS in report order, then every entry point of the
+strings, imported only when a method is resolved or run. The spec also owns the method's config
+section: its defaults and the ranges or choices of its keys, and names the shared sections the method
+reads (SHARED_SECTIONS: `semantic`, the latents several methods learn). This table discovers the spec
+modules on first use: every `*_spec` module and every subpackage's `spec` module of gsbench.methods
+(the built-ins: adding one is two files there, no list to edit), then every entry point of the
 `gsbench.methods` group (an installed plugin package; the entry point names a MethodSpec, or a
-function returning one). So the config check, the CLI choices and the report order read the table
-without importing any method, and this module imports nothing of gsbench above the ground floor.
+function returning one). Report order is the specs' `order`, then their names. So the config check,
+the CLI choices and the report order read the table without importing any method, and this module
+imports nothing of gsbench above the ground floor (the spec modules are imported by name).
 
     [project.entry-points."gsbench.methods"]
     mine = "my_package.mine_spec:SPEC"
@@ -17,9 +21,11 @@ from __future__ import annotations
 import copy
 import importlib
 import logging
+import pkgutil
 from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib.metadata import entry_points
+from pathlib import Path
 from typing import Any, Iterator, Optional
 
 from gsbench.errors import InputError
@@ -39,17 +45,22 @@ class MethodSpec:
     budget: str                          # "module:function" resolved config -> {"rgb_steps", "semantic_steps",
     #                                      "schedule": "joint" | "after rgb" | "none"} (semantic steps' place)
     per_frame_masks: bool = False        # semantic masks per view (not propagated across views)
-    defaults: Optional[dict] = None      # defaults of the method's own `section` when default.yaml has none
-    #                                      (a plugin's section); checked like default.yaml's keys
+    defaults: Optional[dict] = None      # defaults of the method's own `section` (default.yaml has none);
+    #                                      checked like default.yaml's keys
+    rules: Optional[dict] = None         # {"<section>.<key>": gsbench.config_keys.Rule}: ranges and choices
+    #                                      of the own section's keys, beyond the type their default has
+    shared: tuple[str, ...] = ()         # the SHARED_SECTIONS the method reads (the others leave its run id)
+    order: int = 100                     # report order (smaller first; ties by name)
+    moved: Optional[dict] = None         # {old dotted key: today's}: keys the method once kept elsewhere; configs
+    #                                      of older runs are read in today's layout (gsbench.config.upgrade_config)
 
 
 log = logging.getLogger(__name__)
 
-# the built-in methods' spec modules, in report order: the RGB baseline, the decoupled baseline, the
-# joint identity-grouping baseline, the reference
-BUILTIN_SPECS = ("gsbench.methods.vanilla_spec", "gsbench.methods.twostage_spec", "gsbench.methods.grouping_spec",
-                 "gsbench.methods.gaussiands.spec")
+METHODS_PACKAGE = "gsbench.methods"   # where the built-in methods and their specs live (methods/)
 ENTRY_POINT_GROUP = "gsbench.methods"
+# config sections of default.yaml that several methods read; a method names those it uses (MethodSpec.shared)
+SHARED_SECTIONS = ("semantic",)
 
 _REGISTRY: dict[str, MethodSpec] = {}
 _LOADED = False
@@ -63,8 +74,9 @@ def _load() -> None:
         return
     _LOADING = True
     try:
-        for module in BUILTIN_SPECS:
-            _add(importlib.import_module(module).SPEC, module)
+        specs = [(importlib.import_module(m).SPEC, m) for m in builtin_spec_modules()]
+        for spec, module in sorted(specs, key=lambda s: (s[0].order, s[0].name)):
+            _add(spec, module)
         for ep in entry_points(group=ENTRY_POINT_GROUP):
             where = f"entry point {ep.name!r} = {ep.value!r} of {_dist_name(ep)} (group {ENTRY_POINT_GROUP})"
             try:
@@ -79,6 +91,19 @@ def _load() -> None:
         _LOADED = True
     finally:
         _LOADING = False
+
+
+def builtin_spec_modules() -> list[str]:
+    """The spec modules of gsbench.methods, found on its path: `<name>_spec` modules and the `spec` module
+    of each subpackage (importing the package imports no method)."""
+    package = importlib.import_module(METHODS_PACKAGE)
+    found = []
+    for info in pkgutil.iter_modules(package.__path__):
+        if info.name.endswith("_spec") and not info.ispkg:
+            found.append(f"{METHODS_PACKAGE}.{info.name}")
+        elif info.ispkg and (Path(getattr(info.module_finder, "path", "")) / info.name / "spec.py").is_file():
+            found.append(f"{METHODS_PACKAGE}.{info.name}.spec")
+    return sorted(found)
 
 
 def _dist_name(ep) -> str:
@@ -105,6 +130,16 @@ def _check(spec: MethodSpec) -> None:
             raise ValueError(f"method {spec.name!r}: {field} must be 'module:attribute', got {value!r}")
     if spec.defaults is not None and (spec.section is None or not isinstance(spec.defaults, dict)):
         raise ValueError(f"method {spec.name!r}: `defaults` must be a dict of its own config section")
+    if spec.section in SHARED_SECTIONS:
+        raise ValueError(f"method {spec.name!r}: section {spec.section!r} is shared by several methods; name it "
+                         "in `shared` and give the method a section of its own")
+    foreign = [k for k in (spec.rules or {}) if spec.section is None or not k.startswith(spec.section + ".")]
+    if foreign:
+        raise ValueError(f"method {spec.name!r}: rules may only name keys of its own section, not {foreign[0]!r}")
+    unknown = [s for s in spec.shared if s not in SHARED_SECTIONS]
+    if unknown:
+        raise ValueError(f"method {spec.name!r}: shared section {unknown[0]!r} is not one of "
+                         f"{', '.join(SHARED_SECTIONS)}")
 
 
 def section_defaults() -> dict[str, dict]:
@@ -112,6 +147,18 @@ def section_defaults() -> dict[str, dict]:
     _load()
     return {s.section: copy.deepcopy(s.defaults) for s in _REGISTRY.values()
             if s.section is not None and s.defaults is not None}
+
+
+def moved_keys() -> dict[str, str]:
+    """{old dotted key: today's} of every registered method (MethodSpec.moved)."""
+    _load()
+    return {old: new for s in _REGISTRY.values() for old, new in (s.moved or {}).items()}
+
+
+def method_rules() -> dict:
+    """{dotted key: Rule} of every registered method's own section."""
+    _load()
+    return {k: r for s in _REGISTRY.values() for k, r in (s.rules or {}).items()}
 
 
 class _Names(Sequence):
@@ -171,5 +218,6 @@ def method_sort_key(name: Any) -> tuple[int, str]:
     return (names.index(name) if name in names else len(names), str(name))
 
 
-__all__ = ["MethodSpec", "METHODS", "BUILTIN_SPECS", "ENTRY_POINT_GROUP", "register", "unregister", "get_spec",
-           "method_sort_key", "section_defaults"]
+__all__ = ["MethodSpec", "METHODS", "METHODS_PACKAGE", "SHARED_SECTIONS", "ENTRY_POINT_GROUP", "register",
+           "unregister", "get_spec", "method_sort_key", "section_defaults", "method_rules", "moved_keys",
+           "builtin_spec_modules"]

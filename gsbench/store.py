@@ -13,7 +13,7 @@ Run folder (one per trained run, NerfBaselines-like, one JSON of results per run
   results.json      the schema, the metric names and the builders are in gsbench/results.py
 
 Study names, the grid axis keys they vary, their labels and reference rows: the one studies table,
-gsbench/studies.py.
+methods/gaussiands/study_table.py.
 """
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ from gsbench.camera import training_size
 from gsbench.datasets import load_scene
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
-from gsbench.method_table import METHODS, MethodSpec, get_spec, method_sort_key, register, unregister
+from gsbench.method_table import METHODS, SHARED_SECTIONS, MethodSpec, get_spec, method_sort_key, register, unregister
 
 
 def load_target(target: str) -> Any:
@@ -63,6 +63,9 @@ def resolve_for_scene(config: dict, scene) -> tuple[dict, dict]:
         dropped.setdefault(part, reason)
 
     load_target(spec.resolve)(cfg, scene, drop)
+    for section in SHARED_SECTIONS:
+        if section not in spec.shared:
+            drop(section, f"method {spec.name} does not read it")
     cfg["dropped"] = dropped
     return cfg, dropped
 

@@ -2,7 +2,7 @@
 off with a recorded reason. The specs beside each method (methods/*_spec.py) call these."""
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Optional
 
 from gsbench.config import setting
 
@@ -61,13 +61,17 @@ def semantic_source(cfg: dict, scene) -> tuple[bool, str]:
     return True, ""
 
 
-def resolve_semantics(cfg: dict, scene, drop: Drop) -> None:
-    """Semantic losses off when the scene cannot feed them; semantic priors dropped when unused."""
-    on = cfg["gaussiands"]["losses"]
+def resolve_semantics(cfg: dict, scene, drop: Drop, also: Optional[tuple[dict, str, tuple[str, ...]]] = None) -> None:
+    """L_sem (`semantic.loss`) and the method's own semantic switches `also` = (switches, their section,
+    keys) off when the scene cannot feed them; the semantic priors and the autoencoder dropped when none
+    is on."""
+    own, section, keys = also if also is not None else ({}, "", ())
     ok, why = semantic_source(cfg, scene)
     if not ok:
-        switch_off(on, ("sem", "ds"), "gaussiands.losses", why, drop)
-    if not (on["sem"] or on["ds"]):
-        reason = why if not ok else "nothing uses it (gaussiands.losses.sem and .ds are off)"
-        for part in ("priors.masks", "priors.features", "gaussiands.autoencoder", "semantic_channels"):
+        switch_off(cfg["semantic"], ("loss",), "semantic", why, drop)
+        switch_off(own, keys, section, why, drop)
+    if not (cfg["semantic"]["loss"] or any(own[k] for k in keys)):
+        names = " and ".join(["semantic.loss", *(f"{section}.{k}" for k in keys)])
+        reason = why if not ok else f"nothing uses it ({names} {'are' if keys else 'is'} off)"
+        for part in ("priors.masks", "priors.features", "semantic.autoencoder", "semantic_channels"):
             drop(part, reason)

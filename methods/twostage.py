@@ -52,7 +52,7 @@ class TwoStage(Method):
             self.info["n_gaussians"] = self.field.num
             return
         # ---- stage 2: semantics from per-frame masks on frozen geometry
-        g = config["gaussiands"]
+        g = config["semantic"]
         d = int(g["latent_dim"])
         pri = fit_priors(scene, config, run_dir, progress=progress)
         self.providers = dict(pri.providers)

@@ -2,22 +2,25 @@
 registration, what the scene must feed, and its budget (methods/twostage.py is the method)."""
 from __future__ import annotations
 
+from gsbench.config_keys import Rule, at_least
 from gsbench.method_table import MethodSpec
 from gsbench.methods.rules import Drop, resolve_semantics
 
+# the `twostage:` section
+DEFAULTS = {
+    "semantic_iterations": None,   # stage 2 steps (latents only, geometry frozen, no densification); null =
+}                                  # train.iterations, the same semantic budget as GaussianDS (int >= 1 to override)
+RULES: dict[str, Rule] = {"twostage.semantic_iterations": at_least(1, kind="int", integer=True)}
+
 
 def resolve(cfg: dict, scene, drop: Drop) -> None:
-    """RGB + L_sem only: no depth prior, no L_depth / L_tv / L_ds; semantics as the scene allows."""
-    on = cfg["gaussiands"]["losses"]
-    on["depth"] = on["tv"] = on["ds"] = False
+    """RGB, then L_sem only: no depth prior; semantics (the shared `semantic` section) as the scene allows."""
     drop("priors.depth", "method twostage uses no depth prior (RGB, then semantics on frozen geometry)")
-    for k in ("depth", "tv", "ds"):
-        drop(f"gaussiands.losses.{k}", "method twostage: RGB + L_sem only")
     resolve_semantics(cfg, scene, drop)
 
 
 def uses(cfg: dict) -> dict:
-    return {"depth_prior": False, "semantics": bool(cfg["gaussiands"]["losses"]["sem"])}
+    return {"depth_prior": False, "semantics": bool(cfg["semantic"]["loss"])}
 
 
 def semantic_budget(cfg: dict) -> int:
@@ -35,4 +38,5 @@ def budget(cfg: dict) -> dict:
 
 SPEC = MethodSpec(name="twostage", target="gsbench.methods.twostage:TwoStage", label="Two-stage",
                   section="twostage", resolve=f"{__name__}:resolve", uses=f"{__name__}:uses",
-                  budget=f"{__name__}:budget", per_frame_masks=True)
+                  budget=f"{__name__}:budget", per_frame_masks=True,
+                  defaults=DEFAULTS, rules=RULES, shared=("semantic",), order=20)

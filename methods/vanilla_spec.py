@@ -7,11 +7,8 @@ from gsbench.methods.rules import Drop
 
 
 def resolve(cfg: dict, scene, drop: Drop) -> None:
-    """Every auxiliary loss and prior off: the method is RGB only."""
-    on = cfg["gaussiands"]["losses"]
-    for k in ("depth", "tv", "sem", "ds"):
-        on[k] = False
-    for part in ("priors.depth", "priors.masks", "priors.features", "gaussiands.autoencoder", "semantic_channels"):
+    """Every prior off: the method is RGB only (it reads no shared section, so `semantic` leaves its run id)."""
+    for part in ("priors.depth", "priors.masks", "priors.features", "semantic_channels"):
         drop(part, "method vanilla is RGB only")
 
 
@@ -24,4 +21,5 @@ def budget(cfg: dict) -> dict:
 
 
 SPEC = MethodSpec(name="vanilla", target="gsbench.methods.vanilla:Vanilla", label="3DGS (vanilla)", section=None,
-                  resolve=f"{__name__}:resolve", uses=f"{__name__}:uses", budget=f"{__name__}:budget")
+                  resolve=f"{__name__}:resolve", uses=f"{__name__}:uses", budget=f"{__name__}:budget",
+                  order=10)

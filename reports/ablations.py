@@ -10,9 +10,9 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from gsbench.config import config_key
+from gsbench.methods.gaussiands.study_table import MAIN_STUDIES
 from gsbench.methods.registry import method_sort_key
 from gsbench.reports.data import Results, is_null, mean_of_cells, same
-from gsbench.studies import MAIN_STUDIES
 
 from gsbench.reports.display import (AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
                                   AX_ORDERING, LOSS_SUBSET_ORDER, REFERENCE_TEXT, STUDIES,

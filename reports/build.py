@@ -27,6 +27,7 @@ from gsbench.reports import pictures as pictures_mod
 
 from gsbench.reports.ablations import (depth_formulation_table, latent_diff_table, loss_subsets_table,  # isort: skip
                                        method_diff_table, noise_table, ordering_table, other_study_tables)
+from gsbench.methods.gaussiands.study_table import MAIN_STUDIES
 from gsbench.reports.budgets import budget_table
 from gsbench.reports.claims_table import claims_table
 from gsbench.reports.controls import controls_table
@@ -36,7 +37,6 @@ from gsbench.reports.studies import reconstruction_table, removal_table, semanti
 from gsbench.reports.sweeps import lambda_table, latent_dim_tables
 from gsbench.reports.table import Table
 from gsbench.store import write_text_atomic
-from gsbench.studies import MAIN_STUDIES
 
 # table id prefix -> section (study) it belongs to
 _SECTION_OF = [

@@ -1,17 +1,17 @@
 """What the report knows about metrics and studies: display names, units, which direction is
 better, how many decimals. One place, so tables, plots and the HTML agree.
 
-The metrics and their display specs are gsbench/metric_table.py; the studies gsbench/studies.py.
+The metrics and their display specs are gsbench/metric_table.py; the studies methods/gaussiands/study_table.py.
 """
 from __future__ import annotations
 
 from gsbench.method_table import METHODS, get_spec
 from gsbench.metric_table import LOGICAL_SPEC, METRICS, MetricSpec
 
-from gsbench.studies import (AX_FORMULATION, AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY,  # noqa: F401  isort: skip
+from gsbench.methods.gaussiands.study_table import (AX_FORMULATION, AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY,  # noqa: F401  isort: skip
                              AX_NOISE_TYPE, AX_ORDERING)
-from gsbench.studies import STUDIES as STUDY_TABLE
-from gsbench.studies import column
+from gsbench.methods.gaussiands.study_table import STUDIES as STUDY_TABLE
+from gsbench.methods.gaussiands.study_table import column
 
 # the few-view count (train.views) that the depth controls vary beside lambda_depth
 AX_VIEWS = column("train.views")
@@ -24,7 +24,7 @@ LOGICAL = {
 
 PROTOCOL_LABELS = {"3dovs": "3D-OVS protocol", "lerf": "LERF-OVS protocol", None: "no semantic protocol"}
 
-# the paper's studies' labels (gsbench/studies.py); control and smoke studies are reported elsewhere
+# the paper's studies' labels (methods/gaussiands/study_table.py); control and smoke studies are reported elsewhere
 STUDIES = {name: st.label for name, st in STUDY_TABLE.items() if st.kind == "paper"}
 
 
@@ -44,7 +44,7 @@ LOSS_SUBSET_ORDER = [
     (True, True, False), (True, False, True), (False, True, True), (True, True, True),
 ]
 
-# The reference row of each study (gsbench/studies.py): every other row is compared with it
+# The reference row of each study (methods/gaussiands/study_table.py): every other row is compared with it
 # (difference and its 95 % interval); a study without one has no reference.
 STUDY_REFERENCE: dict[str, dict] = {n: st.reference_columns() for n, st in STUDY_TABLE.items() if st.reference}
 REFERENCE_TEXT = {n: st.reference_text for n, st in STUDY_TABLE.items() if st.reference}

@@ -20,11 +20,11 @@ import numpy as np
 from PIL import Image
 
 from gsbench.errors import InputError
+from gsbench.methods.gaussiands.study_table import MAIN_STUDIES
 from gsbench.preview_files import FRAME_ARRAYS, REMOVAL_ARRAYS, read_arrays, read_manifest
 from gsbench.reports.data import Results, is_null
 from gsbench.reports.display import method_label
 from gsbench.store import write_bytes_atomic
-from gsbench.studies import MAIN_STUDIES
 
 log = logging.getLogger(__name__)
 e = html.escape

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from gsbench.methods.gaussiands.study_table import MAIN_STUDIES
 from gsbench.reports.data import Results, is_null, mean_of_cells, same
-from gsbench.studies import MAIN_STUDIES
 
 from gsbench.reports.display import (AX_FORMULATION, AX_NOISE_TYPE, AX_ORDERING, FORMULATION_LABELS,  # isort: skip
                                   FORMULATION_ORDER, NOISE_LABELS, NOISE_ORDER, ORDERING_LABELS, ORDERING_ORDER,

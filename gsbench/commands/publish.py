@@ -3,6 +3,7 @@
     gsbench publish RUNS --to results/cpu          add the finished cells of the claims plan in RUNS
     gsbench publish --status [results/cpu]         current / stale cells per grid
     gsbench publish --page docs/claims.md --from results/cpu --readme README.md [--check]
+    gsbench publish --upgrade [results/cpu]        rewrite cells of an older config layout (moved keys)
 
 RUNS is a `gsbench claims --out` folder. A cell whose config is not the plan's, or that another
 numerics version computed, is refused; then nothing is written (docs/publishing.md).
@@ -14,6 +15,7 @@ from pathlib import Path
 
 from gsbench.errors import InputError
 from gsbench.grids.store import classify, format_store_status, plan_for, publish, read_store, repo_store
+from gsbench.grids.store_upgrade import upgrade_store
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -22,6 +24,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--to", type=Path, default=None, metavar="STORE", help="the store to add them to")
     parser.add_argument("--status", nargs="?", const="", default=None, metavar="STORE",
                         help="list the store's current and stale cells (default: the repository's results/cpu)")
+    parser.add_argument("--upgrade", nargs="?", const="", default=None, metavar="STORE",
+                        help="rewrite the store's cells written before a method moved config keys, each under "
+                             "the run id today's plan gives it, when its upgraded config is the plan's "
+                             "(default: the repository's results/cpu)")
     parser.add_argument("--page", type=Path, default=None, metavar="PAGE",
                         help="generate the claims page (figures in PAGE without .md/) from the store")
     parser.add_argument("--from", dest="source", type=Path, default=None, metavar="STORE",
@@ -47,9 +53,9 @@ def _store(path, option: str) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     modes = [m for m, on in (("RUNS", args.runs is not None), ("--status", args.status is not None),
-                             ("--page", args.page is not None)) if on]
+                             ("--page", args.page is not None), ("--upgrade", args.upgrade is not None)) if on]
     if len(modes) != 1:
-        raise InputError("give one of RUNS --to STORE, --status [STORE] or --page PAGE"
+        raise InputError("give one of RUNS --to STORE, --status [STORE], --upgrade [STORE] or --page PAGE"
                          + (f" (got {', '.join(modes)})" if modes else ""))
     if args.runs is not None and args.to is None:
         raise InputError("RUNS needs --to STORE (the store to add the cells to)")
@@ -58,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
         return _publish(args.runs, args.to, grids)
     if args.status is not None:
         return _status(_store(args.status, "--status"), grids)
+    if args.upgrade is not None:
+        return _upgrade(_store(args.upgrade, "--upgrade"), grids)
     return _page(args, _store(args.source, "--from"), grids)
 
 
@@ -71,6 +79,18 @@ def _publish(runs: Path, store: Path, grids: list) -> int:
         print(f"published: {p}")
     print(f"gsbench publish: {len(rep.written)} cells added, {len(rep.replaced)} replaced (older numerics version), "
           f"{len(rep.unchanged)} already published, {rep.not_finished} not finished")
+    return 0
+
+
+def _upgrade(store: Path, grids: list) -> int:
+    rep = upgrade_store(store, grids)
+    if rep.refused:
+        for path, why in rep.refused:
+            print(f"refused: {path}: {why}")
+        raise InputError(f"{store}: {len(rep.refused)} cells refused (listed above); nothing was rewritten")
+    for grid, old, new in rep.upgraded:
+        print(f"upgraded: {grid}/{old} -> {grid}/{new}")
+    print(f"{len(rep.upgraded)} cells upgraded, {rep.current} already in today's layout")
     return 0
 
 

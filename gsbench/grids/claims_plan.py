@@ -29,7 +29,7 @@ QUICK_SET = {
     "train.eval_every": 1000,
     "train.checkpoint_every": 1000,
     "train.log_every": 10,
-    "gaussiands.autoencoder.epochs": 5,
+    "semantic.autoencoder.epochs": 5,
     "eval.fps_warmup": 0,
     "eval.fps_repeats": 1,
     "eval.previews": 0,       # the pictures are a quarter of a quick cell's evaluation and no claim reads them

@@ -25,11 +25,11 @@ from gsbench.config import (
 )
 from gsbench.datasets import synthetic
 from gsbench.errors import InputError
-from gsbench.studies import STUDIES as STUDY_TABLE
+from gsbench.methods.gaussiands.study_table import STUDIES as STUDY_TABLE
 
 GRID_DIR = Path(__file__).parent
 
-# Study names and the axis keys they vary: the one studies table, gsbench/studies.py.
+# Study names and the axis keys they vary: the one studies table, methods/gaussiands/study_table.py.
 # A grid of a paper study may vary only that study's axes; a control or smoke study (e.g. tiny-test)
 # is a name, not a contract, so its grids may vary anything.
 STUDIES: dict[str, tuple[str, ...]] = {name: st.axes for name, st in STUDY_TABLE.items() if st.kind == "paper"}

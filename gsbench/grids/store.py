@@ -262,7 +262,7 @@ def _json(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, default=str)
 
 
-def _first_difference(a: dict, b: dict) -> str:
+def first_difference(a: dict, b: dict) -> str:
     """The first dotted key where `b` (the run's) differs from `a` (the plan's), with both values."""
     fa, fb = flatten(a), flatten(b)
     for k in sorted(set(fa) | set(fb)):
@@ -302,7 +302,7 @@ def _cell_record(g: Grid, pc: PlannedCell, results: dict, scenes: dict) -> tuple
         scenes[sp] = load_scene(sp)
     planned = canonical(resolve_for_scene(pc.config, scenes[sp])[0])
     if _json(planned) != _json(canonical(config)):
-        return None, f"config.json is not the plan's config ({_first_difference(planned, canonical(config))})"
+        return None, f"config.json is not the plan's config ({first_difference(planned, canonical(config))})"
     cell_st = rundir.read_optional(run_dir / rundir.CELL_STATUS)
     finished = cell_st.get("finished") or (rundir.read_status(run_dir) or {}).get("time")
     rec = {"store_version": STORE_VERSION, "numerics_version": NUMERICS_VERSION, "grid": g.name, "study": g.study,

@@ -43,7 +43,7 @@ class FeatureAutoencoder(nn.Module):
     def __init__(self, in_dim: int = 512, latent_dim: int = 3, hidden: Sequence[int] = (256, 128, 64, 32)) -> None:
         super().__init__()
         if latent_dim < 1:
-            raise ValueError(f"gaussiands.latent_dim must be >= 1, got {latent_dim}")
+            raise ValueError(f"semantic.latent_dim must be >= 1, got {latent_dim}")
         self.in_dim, self.latent_dim, self.hidden = int(in_dim), int(latent_dim), [int(h) for h in hidden]
         self.encoder = _mlp([self.in_dim, *self.hidden, self.latent_dim])
         self.decoder = _mlp([self.latent_dim, *reversed(self.hidden), self.in_dim])

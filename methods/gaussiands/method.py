@@ -7,8 +7,8 @@ L_depth and L_tv see the rendered depth divided by its own (detached) alpha-weig
 (losses.normalised_depth), so both are scale-free and the lambdas weigh them alike on every scene.
 
 Inputs come from gsbench.priors: pose-aware pseudo-video order (priors.ordering), propagated masks,
-512-d mask features (compressed by the frozen autoencoder to d = gaussiands.latent_dim) and the depth
-prior. Terms the resolved config switched off (gaussiands.losses.*) are neither computed nor fed.
+512-d mask features (compressed by the frozen autoencoder to d = semantic.latent_dim) and the depth
+prior. Terms the resolved config switched off (gaussiands.losses.*, semantic.loss) are neither computed nor fed.
 """
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ class GaussianDS(Method):
         self.info["priors_skipped"] = dict(pri.skipped)
 
         targets = None
-        d = int(g["latent_dim"]) if use["semantics"] else 0
+        d = int(config["semantic"]["latent_dim"]) if use["semantics"] else 0
         if use["semantics"]:
             targets = self._semantic_targets(pri, config, d, resume, {v: (W, H) for v in train_ids}, dev)
         # ---- depth prior and its edges E_d (invariant to the per-iteration affine alignment, see losses.py)
@@ -97,7 +97,7 @@ class GaussianDS(Method):
                              f"({pri.skipped})")
         ae_state = (resume or {}).get("extra", {}).get("autoencoder")
         self.autoencoder, self.info["autoencoder"], targets = semantic_targets(
-            pri.masks, pri.mask_features, config["gaussiands"]["autoencoder"], d, int(config["seed"]), ae_state,
+            pri.masks, pri.mask_features, config["semantic"]["autoencoder"], d, int(config["seed"]), ae_state,
             sizes, dev, data_on(config))
         return targets
 
@@ -136,7 +136,7 @@ def gaussiands_loss(config: dict, dprior: dict, targets, has_any: dict[int, bool
     it: StepContext (view id, render output, ground-truth image) -> LossResult."""
     g = config["gaussiands"]
     lam = g["lambdas"]
-    on = g["losses"]
+    on = {**g["losses"], "sem": bool(config["semantic"]["loss"])}   # L_sem's switch is the shared one
     lam_dssim = float(config["train"]["lambda_dssim"])
     form = g["depth_formulation"]
     min_valid = int(g["min_valid_pixels"])

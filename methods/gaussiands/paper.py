@@ -12,7 +12,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from gsbench.studies import AX_FORMULATION, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_ORDERING
+from gsbench.methods.gaussiands.study_table import (
+    AX_FORMULATION,
+    AX_LATENT,
+    AX_LOSSES,
+    AX_NOISE_SEVERITY,
+    AX_NOISE_TYPE,
+    AX_ORDERING,
+)
 from gsbench.train.losses import EDGE_FLOOR
 
 ROBUST_MARGIN_DB = 0.5  # gsbench's equivalence margin for "PSNR is robust" (dB), not the paper's

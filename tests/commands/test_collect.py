@@ -60,8 +60,8 @@ def test_missing_values_are_nan_with_reason(runs: Path):
 def test_axis_columns_are_typed(runs: Path):
     df = collect(runs)
     assert str(df["axis.gaussiands.losses.depth"].dtype) == "boolean"
-    assert df["axis.gaussiands.latent_dim"].dtype == "float64"
-    assert _v(df, "lat/d16", "psnr")["axis.gaussiands.latent_dim"] == 16.0
+    assert df["axis.semantic.latent_dim"].dtype == "float64"
+    assert _v(df, "lat/d16", "psnr")["axis.semantic.latent_dim"] == 16.0
     assert _v(df, "ord/pose", "psnr")["axis.priors.ordering"] == "pose"
     # runs outside a study have no axis value
     assert pd.isna(_v(df, "main/gds_sofa", "psnr")["axis.priors.ordering"])
@@ -94,7 +94,7 @@ def test_csv_fallback_without_pyarrow(runs: Path, monkeypatch):
     assert out.name == "collected.csv" and not (runs / "collected.parquet").exists()
     back = read_collected(out)
     r = back[(back["run_id"] == "id-lat/d8") & (back["metric"] == "miou_lerf")].iloc[0]
-    assert r["value"] == pytest.approx(0.63) and r["axis.gaussiands.latent_dim"] == 8.0
+    assert r["value"] == pytest.approx(0.63) and r["axis.semantic.latent_dim"] == 8.0
     b = back[(back["run_id"] == "id-loss/011") & (back["metric"] == "psnr")].iloc[0]
     assert b["axis.gaussiands.losses.depth"] == False and b["axis.gaussiands.losses.ds"] == True  # noqa: E712
     lp = back[(back["run_id"] == "id-main/vanilla_bench") & (back["metric"] == "lpips")].iloc[0]

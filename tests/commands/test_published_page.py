@@ -71,7 +71,7 @@ def _swept_cells() -> list[Published]:
     for d in (3, 8):
         for seed in (0, 1):
             rid = f"{d:02d}{seed:02d}" + "ab" * 6
-            grid = {"gaussiands.latent_dim": d}
+            grid = {"semantic.latent_dim": d}
             results = {"run_id": rid, "method": "gaussiands", "scene": "tabletop-medium-0", "seed": seed,
                        "study": "latent_dim", "grid": grid, "protocol": "3dovs", "protocols": ["3dovs"],
                        "status": "done", "metrics": {"miou_3dovs": 0.4 + 0.01 * d + 0.005 * seed, "psnr": 20.0}}

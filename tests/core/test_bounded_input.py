@@ -150,7 +150,7 @@ def test_read_jsonl_skips_a_deep_line_with_a_warning(tmp_path, caplog):
 
 def test_every_list_valued_key_has_a_length_and_element_rule():
     lists = [k for k, v in config.flatten(config.default_tree()).items() if isinstance(v, list)]
-    assert {"train.background", "gaussiands.autoencoder.hidden", "priors.masks.model_overrides"} <= set(lists)
+    assert {"train.background", "semantic.autoencoder.hidden", "priors.masks.model_overrides"} <= set(lists)
     for key in lists:
         rule = RULES.get(key)
         assert rule is not None and rule.length is not None and rule.item is not None and rule.item.kind, key
@@ -163,9 +163,9 @@ def test_every_list_valued_key_has_a_length_and_element_rule():
     ("train.background=[1e9,-5,0]", "train.background[0]=1000000000.0 is out of range: must be in [0, 1]"),
     ("train.background=[0,null,0]", "train.background[1] cannot be null"),
     ("train.background=[true,0,0]", "train.background[0] must be a number, got True"),
-    ("gaussiands.autoencoder.hidden=[64, 2.5]", "gaussiands.autoencoder.hidden[1] must be a whole number, got 2.5"),
-    ("gaussiands.autoencoder.hidden=[64, 0]", "hidden[1]=0 is out of range: must be in [1, 8192]"),
-    ("gaussiands.autoencoder.hidden=[" + ",".join(["8"] * 17) + "]", "must be a list of 0 to 16 whole numbers"),
+    ("semantic.autoencoder.hidden=[64, 2.5]", "semantic.autoencoder.hidden[1] must be a whole number, got 2.5"),
+    ("semantic.autoencoder.hidden=[64, 0]", "hidden[1]=0 is out of range: must be in [1, 8192]"),
+    ("semantic.autoencoder.hidden=[" + ",".join(["8"] * 17) + "]", "must be a list of 0 to 16 whole numbers"),
     ("priors.masks.model_overrides=[a, 1]", "priors.masks.model_overrides[1] must be a str, got 1"),
 ])
 def test_list_values_are_checked(item, message):
@@ -175,14 +175,14 @@ def test_list_values_are_checked(item, message):
 
 
 def test_good_list_values_are_taken():
-    cfg = load_config("gaussiands", None, ["train.background=[1, 0, 0.5]", "gaussiands.autoencoder.hidden=[64.0, 32]",
+    cfg = load_config("gaussiands", None, ["train.background=[1, 0, 0.5]", "semantic.autoencoder.hidden=[64.0, 32]",
                                            "priors.masks.model_overrides=['++model.x=1']"])
     assert cfg["train"]["background"] == [1.0, 0.0, 0.5]
-    assert cfg["gaussiands"]["autoencoder"]["hidden"] == [64, 32]
-    assert isinstance(cfg["gaussiands"]["autoencoder"]["hidden"][0], int)
+    assert cfg["semantic"]["autoencoder"]["hidden"] == [64, 32]
+    assert isinstance(cfg["semantic"]["autoencoder"]["hidden"][0], int)
     assert cfg["priors"]["masks"]["model_overrides"] == ["++model.x=1"]
-    empty = load_config("gaussiands", None, ["gaussiands.autoencoder.hidden=[]"])
-    assert empty["gaussiands"]["autoencoder"]["hidden"] == []
+    empty = load_config("gaussiands", None, ["semantic.autoencoder.hidden=[]"])
+    assert empty["semantic"]["autoencoder"]["hidden"] == []
 
 
 def test_a_long_value_is_not_echoed():

@@ -8,13 +8,13 @@ from gsbench.camera import Camera
 from gsbench.config import load_config, parse_overrides, run_id
 from gsbench.datasets.base import Scene
 from gsbench.errors import InputError
-from gsbench.methods.registry import resolve_for_scene
+from gsbench.methods.registry import resolve_for_scene, uses
 
 
 def test_defaults_carry_the_paper_weights():
     c = load_config("gaussiands")
     assert c["gaussiands"]["lambdas"] == {"depth": 0.01, "tv": 1.5, "sem": 5.0, "ds": 1.0}
-    assert c["gaussiands"]["latent_dim"] == 3 and c["train"]["iterations"] == 30000
+    assert c["semantic"]["latent_dim"] == 3 and c["train"]["iterations"] == 30000
     assert c["gaussiands"]["depth_formulation"] == "scale_shift" and c["method"] == "gaussiands"
 
 
@@ -36,7 +36,7 @@ def test_preset_then_overrides():
         ["nokey=1"],
         ["train.iterations"],
         ["gaussiands.depth_formulation=foo"],
-        ["gaussiands.latent_dim=0"],
+        ["semantic.latent_dim=0"],
         ["query.mode=both"],
     ],
 )
@@ -82,7 +82,7 @@ def test_resolver_keeps_everything_on_a_full_scene():
 def test_resolver_drops_depth_terms_without_depth_prior():
     cfg, dropped = resolve_for_scene(load_config("gaussiands"), _scene(depth=False))
     on = cfg["gaussiands"]["losses"]
-    assert on["depth"] is False and on["ds"] is False and on["tv"] is True and on["sem"] is True
+    assert on["depth"] is False and on["ds"] is False and on["tv"] is True and cfg["semantic"]["loss"] is True
     assert "GT depth" in dropped["gaussiands.losses.depth"] and "priors.depth" in dropped
     # the sparse provider works from points
     cfg2, d2 = resolve_for_scene(load_config("gaussiands", None, ["priors.depth.provider=sparse"]), _scene(depth=False))
@@ -92,17 +92,19 @@ def test_resolver_drops_depth_terms_without_depth_prior():
 def test_resolver_drops_semantics_without_semantics():
     cfg, dropped = resolve_for_scene(load_config("gaussiands"), _scene(instances=False))
     on = cfg["gaussiands"]["losses"]
-    assert on["sem"] is False and on["ds"] is False and on["depth"] is True
-    for part in ("priors.masks", "priors.features", "gaussiands.autoencoder", "semantic_channels"):
+    assert cfg["semantic"]["loss"] is False and on["ds"] is False and on["depth"] is True
+    assert "no semantics in the scene" in dropped["semantic.loss"] and "gaussiands.losses.ds" in dropped
+    for part in ("priors.masks", "priors.features", "semantic.autoencoder", "semantic_channels"):
         assert "no semantics in the scene" in dropped[part]
 
 
 def test_resolver_vanilla_twostage_and_formulation_none():
     cfg, dropped = resolve_for_scene(load_config("vanilla"), _scene())
-    assert not any(cfg["gaussiands"]["losses"].values()) and "priors.depth" in dropped
+    assert "priors.depth" in dropped and "does not read it" in dropped["semantic"]
+    assert not any(uses(cfg).values())
     cfg, dropped = resolve_for_scene(load_config("twostage"), _scene())
-    on = cfg["gaussiands"]["losses"]
-    assert on["sem"] and not (on["depth"] or on["tv"] or on["ds"])
+    assert cfg["semantic"]["loss"] and uses(cfg) == {"depth_prior": False, "semantics": True}
+    assert "priors.depth" in dropped and "semantic" not in dropped
     cfg, dropped = resolve_for_scene(load_config("gaussiands", None, ["gaussiands.depth_formulation=none"]), _scene())
     assert cfg["gaussiands"]["losses"]["depth"] is False and cfg["gaussiands"]["losses"]["ds"] is True
     assert "formulation=none" in dropped["gaussiands.losses.depth"]
@@ -196,7 +198,7 @@ def test_a_wrong_typed_bool_is_refused_by_train_and_ablate(tmp_path, capsys):
     ("train.max_width=0", "train.max_width=0 is out of range: must be >= 1"),
     ("train.iterations=1.5", "train.iterations must be a whole number"),
     ("train.iterations=null", "train.iterations cannot be null"),
-    ("gaussiands.latent_dim='3'", "gaussiands.latent_dim must be a number"),
+    ("semantic.latent_dim='3'", "semantic.latent_dim must be a number"),
 ])
 def test_out_of_range_and_wrong_type_name_key_and_range(item, expect):
     with pytest.raises(InputError) as e:
@@ -286,6 +288,7 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     from gsbench.datasets.splits import HOLDOUT_CHOICES
     from gsbench.evaluation.frames import RESOLUTIONS
     from gsbench.evaluation.segmentation import PROTOCOLS
+    from gsbench.methods.gaussiands import spec as gaussiands_spec
     from gsbench.metrics.lerf import LERF_KERNEL_MODES
     from gsbench.priors.depth import DEPTH_PROVIDERS
     from gsbench.priors.features import FEATURE_PROVIDERS
@@ -298,8 +301,8 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     assert set(config_keys.EVAL_RESOLUTIONS) == set(RESOLUTIONS)
     assert set(config_keys.LERF_KERNEL_MODES) == set(LERF_KERNEL_MODES)
     assert set(config_keys.BACKENDS) == {"auto", *BACKENDS}
-    assert set(config_keys.DEPTH_FORMULATIONS) == set(DEPTH_FORMULATIONS)
-    assert set(config_keys.DS_AVERAGES) == set(DS_AVERAGES)
+    assert set(gaussiands_spec.DEPTH_FORMULATIONS) == set(DEPTH_FORMULATIONS)   # the method's own keys: its spec
+    assert set(gaussiands_spec.DS_AVERAGES) == set(DS_AVERAGES)
     assert set(config_keys.DEPTH_PROVIDERS) == set(DEPTH_PROVIDERS)
     assert set(config_keys.MASK_PROVIDERS) == set(MASK_PROVIDERS)
     assert set(config_keys.FEATURE_PROVIDERS) == set(FEATURE_PROVIDERS)

@@ -46,7 +46,6 @@ FLOORS: dict[str, int] = {
     "gsbench.resize": 0,           # every resize: RGB as 3DGS, nearest as PIL, area
     "gsbench.rundir": 0,           # the run folder's file names, status reader beside its writer
     "gsbench.metric_table": 0,     # every metric name and how it is shown
-    "gsbench.studies": 0,          # the one table of studies (axes, labels, reference rows)
     "gsbench.preview_files": 0,    # the previews folder of a run: manifest and arrays, writer and reader
     "gsbench.step_timers": 0,      # wall-time totals of a training step's parts (benchmarks/train_speed.py)
     # 1: what a method is built from

@@ -3,10 +3,10 @@ grid's study is in the studies table with the axes it varies."""
 from __future__ import annotations
 
 from gsbench.grids.grid_file import GRID_DIR, load_grid
+from gsbench.methods.gaussiands.study_table import MAIN_STUDIES, STUDIES
 from gsbench.metric_table import KNOWN_METRICS, METRICS
 from gsbench.reports.display import STUDIES as REPORT_LABELS
 from gsbench.reports.display import STUDY_REFERENCE, metric_spec
-from gsbench.studies import MAIN_STUDIES, STUDIES
 
 
 def test_every_known_metric_has_its_spec_and_the_report_reads_the_same_one():

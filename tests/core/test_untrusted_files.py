@@ -188,5 +188,6 @@ def test_vanilla_train_prints_what_was_dropped_on_one_line(tiny_scene, tmp_path,
     line = lines[0]
     assert line.count("gsbench") == 1 and line.startswith("gsbench: dropped (not used by this run): ")
     assert line.count("method vanilla is RGB only") == 1
-    for part in ("priors.depth", "priors.masks", "priors.features", "gaussiands.autoencoder", "semantic_channels"):
+    for part in ("priors.depth", "priors.masks", "priors.features", "semantic_channels"):
         assert part in line
+    assert "semantic (method vanilla does not read it)" in line

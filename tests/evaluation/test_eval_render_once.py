@@ -7,7 +7,7 @@ import pytest
 
 TINY = ["backend=cpu", "train.iterations=12", "train.max_width=32", "train.eval_every=0", "train.log_every=4",
         "train.checkpoint_every=0", "train.eval_views=0", "train.densify.enabled=false",
-        "gaussiands.autoencoder.epochs=5", "train.init.max_points=200", "priors.masks.provider=gt"]
+        "semantic.autoencoder.epochs=5", "train.init.max_points=200", "priors.masks.provider=gt"]
 
 
 class _Counting:

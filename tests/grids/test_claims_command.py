@@ -34,7 +34,7 @@ import gsbench.grids.claims_plan as c
 c.QUICK_SEEDS[:] = [0]
 c.QUICK_RESOLUTION[:] = [16, 12]
 c.QUICK_VIEWS = 4
-c.QUICK_SET.update({"train.iterations": 1, "train.max_width": 16, "gaussiands.autoencoder.epochs": 1})
+c.QUICK_SET.update({"train.iterations": 1, "train.max_width": 16, "semantic.autoencoder.epochs": 1})
 from gsbench.cli import main
 sys.exit(main(sys.argv[1:]))
 """

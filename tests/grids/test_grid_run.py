@@ -146,9 +146,9 @@ def _write_tiny_gaussiands_grid(path: Path, latent_dims: list[int]) -> Path:
     (21 views at 128x96, 500 autoencoder epochs, 8 cells: ~12 s a cell on 2 cores)."""
     raw = {"study": "tiny-test", "base": {"method": "gaussiands", "preset": "cpu-small",
                                           "set": {"train.eval_every": 100, "train.checkpoint_every": 100,
-                                                  "gaussiands.autoencoder.epochs": 10}},
+                                                  "semantic.autoencoder.epochs": 10}},
            "scenes": [TINY_SCENE], "seeds": [0], "mode": "product",
-           "axes": {"gaussiands.latent_dim": latent_dims, "gaussiands.losses.ds": [True, False]}}
+           "axes": {"semantic.latent_dim": latent_dims, "gaussiands.losses.ds": [True, False]}}
     path.write_text(yaml.safe_dump(raw, sort_keys=False))
     return path
 
@@ -244,7 +244,7 @@ def test_ablate_submitit_local(own_tmp):
     pids = set()
     for d in cells:
         res = read_json(d / "results.json")
-        assert res["study"] == "tiny-test" and set(res["grid"]) == {"gaussiands.latent_dim", "gaussiands.losses.ds"}
+        assert res["study"] == "tiny-test" and set(res["grid"]) == {"semantic.latent_dim", "gaussiands.losses.ds"}
         assert res["config"]["train"]["iterations"] == 10
         m = res["metrics"]
         # a synthetic scene supports both protocols; both query modes are evaluated and named
@@ -273,7 +273,7 @@ def test_priors_requests_group_cells_that_share_priors(own_tmp):
     grid = grids.load_grid(_write_grid(
         own_tmp / "g.yaml", base={"method": "gaussiands", "preset": "cpu-small",
                                    "set": {"train.iterations": 5, "train.max_width": 32}},
-        axes={"gaussiands.latent_dim": [3, 6], "gaussiands.losses.tv": [True, False]},
+        axes={"semantic.latent_dim": [3, 6], "gaussiands.losses.tv": [True, False]},
         extra_cells=[{"method": "vanilla"}, {"method": "twostage"}, {"priors.ordering": "random"}]))
     planned = grids.plan(grid, own_tmp / "runs")
     reqs = {pc.cell.method + str(pc.cell.axes): grids.priors_request(pc.spec()) for pc in planned}

@@ -40,7 +40,7 @@ def test_study_cell_counts():
     assert len(ls.cells()) == 8 * 3 and len(subsets) == 8   # 8 subsets x seeds 0, 1, 2
     assert sorted({c.seed for c in ls.cells()}) == [0, 1, 2]
     ld = grids.load_grid("latent_dim-paper")
-    dims = sorted(c.overrides["gaussiands.latent_dim"] for c in ld.cells() if c.method == "gaussiands")
+    dims = sorted(c.overrides["semantic.latent_dim"] for c in ld.cells() if c.method == "gaussiands")
     assert dims == [3, 6, 8, 12, 16, 32]
     assert [c.method for c in ld.cells()].count("vanilla") == 1
     dn = grids.load_grid("depth_noise-paper")
@@ -62,33 +62,33 @@ def test_lambda_sweeps_union_without_duplicate_default():
 
 
 def test_product_and_zip():
-    g = _grid(mode="zip", axes={"gaussiands.latent_dim": [3, 6], "gaussiands.losses.ds": [True, False]},
+    g = _grid(mode="zip", axes={"semantic.latent_dim": [3, 6], "gaussiands.losses.ds": [True, False]},
               seeds=[0, 1])
-    combos = {(c.seed, c.overrides["gaussiands.latent_dim"], c.overrides["gaussiands.losses.ds"]) for c in g.cells()}
+    combos = {(c.seed, c.overrides["semantic.latent_dim"], c.overrides["gaussiands.losses.ds"]) for c in g.cells()}
     assert combos == {(0, 3, True), (0, 6, False), (1, 3, True), (1, 6, False)}
-    g = _grid(axes={"gaussiands.latent_dim": [3, 6], "gaussiands.losses.ds": [True, False]})
+    g = _grid(axes={"semantic.latent_dim": [3, 6], "gaussiands.losses.ds": [True, False]})
     assert len(g.cells()) == 4
     assert all(c.overrides["seed"] == 0 for c in g.cells())
 
 
 def test_unknown_axis_key_names_the_closest():
-    with pytest.raises(InputError, match=r"unknown config key 'gaussiands.latent_dims'.*gaussiands.latent_dim"):
-        _grid(axes={"gaussiands.latent_dims": [3, 6]})
+    with pytest.raises(InputError, match=r"unknown config key 'semantic.latent_dims'.*semantic.latent_dim"):
+        _grid(axes={"semantic.latent_dims": [3, 6]})
     with pytest.raises(InputError, match="unknown config key 'gaussiands.losses'"):
         _grid(axes={"gaussiands.losses": [True]})          # a subtree, not a leaf
 
 
 def test_validation_errors():
     with pytest.raises(InputError, match="zip axes need equal lengths"):
-        _grid(mode="zip", axes={"gaussiands.latent_dim": [3, 6], "gaussiands.losses.ds": [True]})
+        _grid(mode="zip", axes={"semantic.latent_dim": [3, 6], "gaussiands.losses.ds": [True]})
     with pytest.raises(InputError, match="must be true/false"):
         _grid(axes={"gaussiands.losses.ds": ["yes"]})
     with pytest.raises(InputError, match="must be a number"):
-        _grid(axes={"gaussiands.latent_dim": ["3"]})
+        _grid(axes={"semantic.latent_dim": ["3"]})
     with pytest.raises(InputError, match="non-empty list"):
-        _grid(axes={"gaussiands.latent_dim": []})
+        _grid(axes={"semantic.latent_dim": []})
     with pytest.raises(InputError, match="unknown top-level keys"):
-        _grid(axis={"gaussiands.latent_dim": [3]})
+        _grid(axis={"semantic.latent_dim": [3]})
     with pytest.raises(InputError, match="base.preset: unknown preset"):
         _grid(base={"preset": "gpu-huge"})
     with pytest.raises(InputError, match="study 'latent_dim' varies"):
@@ -101,7 +101,7 @@ def test_validation_errors():
 
 def test_set_cannot_override_an_axis():
     with pytest.raises(InputError, match="conflicts with the grid axis"):
-        grids.load_grid("tiny-test", extra_set={"gaussiands.latent_dim": 8})
+        grids.load_grid("tiny-test", extra_set={"semantic.latent_dim": 8})
     g = grids.load_grid("tiny-test", extra_set={"train.iterations": 30})
     assert all(c.overrides["train.iterations"] == 30 for c in g.cells())
 
@@ -168,8 +168,8 @@ def test_cli_list_dry_run_and_errors(capsys):
         assert f"{study}-cpu" in out and f"{study}-paper" in out
     assert main(["ablate", "--grid", "loss_subsets-cpu", "--out", "x", "--dry-run"]) == 0
     assert "24 cells" in capsys.readouterr().out
-    assert main(["ablate", "--grid", "tiny-test", "--out", "x", "--set", "gaussiands.latent_dims=3"]) == 1
-    assert "did you mean gaussiands.latent_dim" in capsys.readouterr().err
+    assert main(["ablate", "--grid", "tiny-test", "--out", "x", "--set", "semantic.latent_dims=3"]) == 1
+    assert "did you mean semantic.latent_dim" in capsys.readouterr().err
 
 
 def test_unknown_scene_name_is_an_error():

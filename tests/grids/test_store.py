@@ -202,3 +202,50 @@ def test_verify_exact_then_tampered(published, tmp_path, capsys):
     out = capsys.readouterr().out
     psnr = next(ln for ln in out.splitlines() if ln.strip().startswith("psnr "))
     assert psnr.rstrip().endswith("MISMATCH") and "1 mismatched" in out
+
+
+def _as_layout1(store: Path, fake_id: str) -> tuple[Path, str, dict]:
+    """One published cell rewritten as gsbench wrote it before the `semantic` section (d, the autoencoder
+    and L_sem's switch in `gaussiands`), under another run id: (its file, its true id, its record)."""
+    path = sorted(store.glob("*/*.json"))[0]
+    rec = read_json(path)
+    true_id, sem = rec["run_id"], rec["config"].pop("semantic")
+    g = rec["config"]["gaussiands"]
+    g["latent_dim"], g["autoencoder"], g["losses"]["sem"] = sem["latent_dim"], sem["autoencoder"], sem["loss"]
+    rec["config"]["dropped"] = {("gaussiands.autoencoder" if k == "semantic" else k): v
+                                for k, v in rec["config"]["dropped"].items()}
+    rec["run_id"] = rec["config"]["run_id"] = rec["results"]["run_id"] = fake_id
+    old = path.with_name(f"{fake_id}.json")
+    old.write_text(store_mod.record_text(rec))
+    path.unlink()
+    return old, true_id, rec
+
+
+def test_upgrade_rewrites_a_layout1_cell_under_todays_run_id(published, capsys):
+    grid_file, _, store = published
+    before = {p.name: read_json(p) for p in store.glob("*/*.json")}
+    old, true_id, _ = _as_layout1(store, "00000000000000aa")
+    assert main(["publish", "--status", str(store), "--grids", str(grid_file)]) == 0
+    assert "stale: " in capsys.readouterr().out                       # the old layout's id is no cell of the plan
+    assert main(["publish", "--upgrade", str(store), "--grids", str(grid_file)]) == 0
+    assert f"-> {old.parent.name}/{true_id}" in capsys.readouterr().out and not old.exists()
+    back = read_json(old.with_name(f"{true_id}.json"))
+    assert back["provenance"].pop("upgraded")["from_run_id"] == "00000000000000aa"
+    want = before[f"{true_id}.json"]
+    assert back["results"] == want["results"] and back["run_id"] == true_id
+    assert {k: v for k, v in back["config"].items() if k != "dropped"} == \
+        {k: v for k, v in want["config"].items() if k != "dropped"}
+    assert main(["publish", "--status", str(store), "--grids", str(grid_file)]) == 0
+    assert "stale: " not in capsys.readouterr().out
+
+
+def test_upgrade_refuses_a_cell_whose_config_is_not_the_plans(published, capsys):
+    grid_file, _, store = published
+    old, _, rec = _as_layout1(store, "00000000000000bb")
+    rec["config"]["train"]["lr"]["color"] *= 2                        # not what the plan computes
+    old.write_text(store_mod.record_text(rec))
+    files = sorted(p.name for p in store.glob("*/*.json"))
+    assert main(["publish", "--upgrade", str(store), "--grids", str(grid_file)]) == 1
+    cap = capsys.readouterr()
+    assert "is not the plan's (train.lr.color" in cap.out and "nothing was rewritten" in cap.err
+    assert sorted(p.name for p in store.glob("*/*.json")) == files    # nothing rewritten

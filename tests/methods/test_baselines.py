@@ -12,7 +12,7 @@ from gsbench.train.trainer import sh_active_degree
 
 TINY = ["backend=cpu", "train.iterations=12", "train.max_width=32", "train.eval_every=0", "train.log_every=4",
         "train.checkpoint_every=0", "train.eval_views=1", "train.densify.enabled=false",
-        "gaussiands.autoencoder.epochs=10", "train.init.max_points=300"]
+        "semantic.autoencoder.epochs=10", "train.init.max_points=300"]
 
 
 @pytest.fixture(scope="module")

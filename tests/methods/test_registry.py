@@ -25,8 +25,6 @@ class DummyMethod(Method):
 
 
 def _resolve_dummy(cfg: dict, scene, drop) -> None:
-    for k in cfg["gaussiands"]["losses"]:
-        cfg["gaussiands"]["losses"][k] = False
     drop("priors.depth", "method dummy-test needs no priors")
 
 
@@ -73,8 +71,8 @@ def test_a_registered_method_is_a_cli_choice_and_validates(dummy, tiny_scene):
     assert cfg["method"] == "dummy-test"
     assert registry.get_method("dummy-test") is DummyMethod
     res, dropped = resolve_for_scene(cfg, tiny_scene)
-    assert dropped == {"priors.depth": "method dummy-test needs no priors"}
-    assert not any(res["gaussiands"]["losses"].values())
+    assert dropped == {"priors.depth": "method dummy-test needs no priors",
+                       "semantic": "method dummy-test does not read it"}
     assert registry.priors_request(cfg, tiny_scene) is None
     from gsbench.reports.studies import ordered_methods
 
@@ -136,7 +134,7 @@ class _Stop(Exception):
 
 CONFIGS = [
     [],
-    ["gaussiands.losses.sem=false"],
+    ["semantic.loss=false"],
     ["gaussiands.losses.depth=false", "gaussiands.losses.ds=false"],
     ["priors.depth.provider=none", "train.max_width=16"],
     ["priors.ordering=random", "seed=3"],
@@ -240,7 +238,7 @@ def test_an_entry_point_registers_a_method_after_the_builtins(fresh_table, monke
     eps = [_FakeEntryPoint("ep-test", "pkg.spec:SPEC", lambda: spec)]
     monkeypatch.setattr(fresh_table, "entry_points", lambda group: eps if group == "gsbench.methods" else [])
     assert list(fresh_table.METHODS) == ["vanilla", "twostage", "grouping", "gaussiands", "ep-test"]
-    assert fresh_table.section_defaults() == {"ep_test": {"alpha": 1.5}}
+    assert fresh_table.section_defaults()["ep_test"] == {"alpha": 1.5}
     cfg = load_config("ep-test", None, ["ep_test.alpha=2.5"])        # its own section is a checked key
     assert cfg["ep_test"]["alpha"] == 2.5
     with pytest.raises(InputError, match="ep_test.alpah"):

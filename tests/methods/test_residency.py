@@ -46,7 +46,7 @@ def test_host_data_trains_the_same_run_as_device_data(method, tiny_scene, tmp_pa
         run = tmp_path / on
         # 10 steps logged every 5 (each logged loss reads every input) and a 10-epoch autoencoder, not 500
         assert main(["train", *args, "--scene", str(tiny_scene), "--out", str(run),
-                     "--set", "train.iterations=10", "train.log_every=5", "gaussiands.autoencoder.epochs=10",
+                     "--set", "train.iterations=10", "train.log_every=5", "semantic.autoencoder.epochs=10",
                      f"train.data_on={on}"]) == 0
         rows = [json.loads(x) for x in (run / "train_log.jsonl").read_text().splitlines()]
         logs[on] = [{k: v for k, v in r.items() if k not in ("wall_s", "time", "elapsed_s")} for r in rows

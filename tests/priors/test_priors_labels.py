@@ -52,10 +52,10 @@ def test_real_layout_has_no_instances_and_gt_masks_come_from_class_masks(ovs_sce
     assert s.layout == "3dovs" and not s.has_instances and not s.has_depth and s.has_semantics
     assert s.semantic_view_ids == list(EVEN)
     _, dropped = resolve_for_scene(gaussiands_cfg(), s)
-    assert not any(k.startswith(("gaussiands.losses.sem", "priors.masks", "priors.features")) for k in dropped)
+    assert not any(k.startswith(("semantic.loss", "priors.masks", "priors.features")) for k in dropped)
     # the weight-free simulated segmenter needs instance maps: the message names them and the way out
     _, dropped = resolve_for_scene(load_config("gaussiands", None, ["priors.masks.provider=simulated"]), s)
-    why = dropped["gaussiands.losses.sem"]
+    why = dropped["semantic.loss"]
     assert "GT instance maps" in why and "3D-OVS class masks can feed priors.masks.provider=gt" in why
     assert "no semantics in the scene" not in why
 
@@ -117,7 +117,7 @@ def test_lerf_labels_one_segment_per_object_named_by_category(tmp_path):
     s = load_scene(root)
     assert s.layout == "lerf" and not s.has_semantics and not s.has_instances and s.label_view_ids == list(EVEN)
     _, dropped = resolve_for_scene(gaussiands_cfg(), s)
-    assert "gaussiands.losses.sem" not in dropped
+    assert "semantic.loss" not in dropped
     v = 2
     lv = L.label_view(s, v, (32, 24))
     objs = s.gt_labels(v)
@@ -148,14 +148,14 @@ def test_resolver_names_what_the_scene_lacks(tmp_path):
     # labels only on held-out views (0 and 8 are the every-8th test views)
     root = real_layout(tmp_path / "held", "3dovs", [0, 8], views=16)
     _, dropped = resolve_for_scene(gaussiands_cfg(), load_scene(root))
-    assert "none of them trained on" in dropped["gaussiands.losses.sem"]
+    assert "none of them trained on" in dropped["semantic.loss"]
     # with every view trained on, the same labels feed the loss
     _, dropped = resolve_for_scene(gaussiands_cfg("train.holdout=none"), load_scene(root))
-    assert "gaussiands.losses.sem" not in dropped
+    assert "semantic.loss" not in dropped
     # no labels at all
     shutil.rmtree(root / "segmentations")
     _, dropped = resolve_for_scene(gaussiands_cfg(), load_scene(root))
-    why = dropped["gaussiands.losses.sem"]
+    why = dropped["semantic.loss"]
     assert "GT instance maps, 3D-OVS class masks or LERF-OVS labels" in why and "no semantics in the scene" in why
 
 
@@ -208,7 +208,7 @@ def test_gaussiands_lifts_class_masks_to_held_out_views(tmp_path):
     # 14 training views, 8 of them unlabelled; 200 steps = 14 full passes (112 unlabelled steps) + 4 more
     skipped = sum(r.get("skipped", {}).get("sem", 0) for r in read_jsonl(run / "train_log.jsonl") if "loss" in r)
     assert 112 <= skipped <= 116
-    assert read_json(run / "train_summary.json")["dropped"].get("gaussiands.losses.sem") is None
+    assert read_json(run / "train_summary.json")["dropped"].get("semantic.loss") is None
 
 
 @pytest.mark.slow

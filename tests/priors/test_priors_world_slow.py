@@ -15,7 +15,7 @@ pytestmark = pytest.mark.slow
 OVER = ["backend=cpu", "train.iterations=200", "train.max_width=64", "train.eval_every=1000", "train.log_every=50",
         "train.checkpoint_every=1000", "train.eval_views=1", "train.densify.from_iter=30",
         "train.densify.interval=40", "train.densify.until_iter=150", "train.densify.opacity_reset_interval=1000",
-        "gaussiands.autoencoder.epochs=500", "query.mode=decode"]
+        "semantic.autoencoder.epochs=500", "query.mode=decode"]
 
 
 @pytest.fixture(scope="module")
@@ -47,6 +47,6 @@ def test_segmenter_severity_0_vs_3_moves_miou_beyond_its_interval(world):
 
 def test_semantic_loss_off_collapses_miou(world):
     on = getattr(world, "s0", None) or [world("s0-0", ["priors.masks.severity=0", "seed=0"])]
-    off = world("sem-off", ["priors.masks.severity=0", "seed=0", "gaussiands.losses.sem=false"])
+    off = world("sem-off", ["priors.masks.severity=0", "seed=0", "semantic.loss=false"])
     print(f"\n3D-OVS mIoU (decode), L_sem on: {on}, L_sem off: {off}")
     assert off < 0.5 * float(np.mean(on)), (on, off)

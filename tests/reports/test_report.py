@@ -344,17 +344,17 @@ def test_unknown_study_gets_generic_table(tmp_path: Path):
     for d in (3, 6):
         for ds in (True, False):
             write_run(root, f"t/{d}{ds}", method="gaussiands", scene="tabletop", study="tiny-test",
-                      grid={"gaussiands.latent_dim": d, "gaussiands.losses.ds": ds},
+                      grid={"semantic.latent_dim": d, "gaussiands.losses.ds": ds},
                       metrics={"psnr": 20.0 + d + ds, "miou_3dovs": 0.1 * d})
     tables = build_tables(Results(collect(root)))
     assert [t.id for t in tables] == ["study_tiny_test", "study_tiny_test_diff", "budgets"]
     t = tables[0]
-    assert t.label_headers == ["gaussiands.latent_dim", "gaussiands.losses.ds"] and t.section == "other_tiny-test"
+    assert t.label_headers == ["gaussiands.losses.ds", "semantic.latent_dim"] and t.section == "other_tiny-test"
     got = [(r.labels, [c.plain() for c in r.cells]) for r in t.rows]
-    assert got == [(["3", "False"], ["23.00", "30.00"]), (["3", "True"], ["24.00", "30.00"]),
-                   (["6", "False"], ["26.00", "60.00"]), (["6", "True"], ["27.00", "60.00"])]
+    assert got == [(["False", "3"], ["23.00", "30.00"]), (["False", "6"], ["26.00", "60.00"]),
+                   (["True", "3"], ["24.00", "30.00"]), (["True", "6"], ["27.00", "60.00"])]
     diff = tables[1]  # reference: d = 3 with L_ds on
     assert diff.section == "other_tiny-test"
     assert [r.cells[0].plain() for r in diff.rows] == [
-        "-1.00 [n/a: one seed] (n=1, paired)", "reference", "+2.00 [n/a: one seed] (n=1, paired)",
+        "-1.00 [n/a: one seed] (n=1, paired)", "+2.00 [n/a: one seed] (n=1, paired)", "reference",
         "+3.00 [n/a: one seed] (n=1, paired)"]

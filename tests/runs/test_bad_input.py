@@ -111,7 +111,7 @@ def test_nonfinite_depth_prior(scene, tmp_path, capsys, bad):
     d = np.load(p)
     d[2:5, 2:6] = np.nan if bad == "nan" else np.inf
     np.save(p, d)
-    code, msg = cli_error(capsys, train_argv(s, tmp_path / "run", "gaussiands", "--set", "gaussiands.losses.sem=false",
+    code, msg = cli_error(capsys, train_argv(s, tmp_path / "run", "gaussiands", "--set", "semantic.loss=false",
                                              "--set", "gaussiands.losses.ds=false"))
     assert code == 1
     assert str(p) in msg

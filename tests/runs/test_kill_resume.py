@@ -38,7 +38,7 @@ def workspace(tiny_scene, tmp_path_factory) -> Path:
 
 def train_args(scene: Path, out: Path, *sets: str) -> list[str]:
     args = ["train", "--method", "gaussiands", "--scene", str(scene), "--preset", "cpu-small", "--out", str(out),
-            "--no-progress", "--set", "gaussiands.autoencoder.epochs=10"]   # not 500: ~2.5 s saved per process
+            "--no-progress", "--set", "semantic.autoencoder.epochs=10"]   # not 500: ~2.5 s saved per process
     for s in sets:
         args += ["--set", s]
     return args

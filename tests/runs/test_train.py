@@ -14,7 +14,7 @@ from gsbench.evaluation.trained_run import load_run
 TINY = ["backend=cpu", "train.iterations=30", "train.max_width=32", "train.eval_every=15", "train.log_every=5",
         "train.checkpoint_every=10", "train.eval_views=1", "train.densify.from_iter=5", "train.densify.interval=10",
         "train.densify.until_iter=25", "train.densify.opacity_reset_interval=1000", "train.densify.max_gaussians=1500",
-        "gaussiands.autoencoder.epochs=30", "twostage.semantic_iterations=10", "train.init.max_points=500"]
+        "semantic.autoencoder.epochs=30", "twostage.semantic_iterations=10", "train.init.max_points=500"]
 
 
 @pytest.fixture(scope="module")

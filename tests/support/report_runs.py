@@ -126,7 +126,7 @@ def make_ablations(root: Path) -> None:
     lat = {3: (120.0, 500.0, 0.61, 23.6), 8: (240.0, 600.0, 0.63, 23.7), 16: (480.0, 800.0, 0.62, 23.65)}
     for d, (ts, mem, mi, p) in lat.items():
         write_run(root, f"lat/d{d}", method="gaussiands", scene="waldo_kitchen", protocol="lerf", study="latent_dim",
-                  grid={"gaussiands.latent_dim": d}, metrics={"miou_lerf": mi, "psnr": p},
+                  grid={"semantic.latent_dim": d}, metrics={"miou_lerf": mi, "psnr": p},
                   timings={"train_s": ts}, memory={"peak_rss_mb": mem})
     write_run(root, "lat/vanilla", method="vanilla", scene="waldo_kitchen", protocol="lerf", study="latent_dim",
               grid={"method": "vanilla"}, metrics={"miou_lerf": None, "psnr": 22.0},

@@ -11,7 +11,7 @@ TINY_TRAIN_ARGS = ["--method", "vanilla", "--preset", "cpu-small", "--set", "tra
 # `--set` overrides of a 20-step GaussianDS-capable run on the tiny scene (CPU backend, GT masks).
 TINY_SET = ["backend=cpu", "train.iterations=20", "train.max_width=32", "train.eval_every=0", "train.log_every=5",
             "train.checkpoint_every=0", "train.eval_views=0", "train.densify.from_iter=5", "train.densify.interval=10",
-            "train.densify.until_iter=15", "train.densify.max_gaussians=800", "gaussiands.autoencoder.epochs=10",
+            "train.densify.until_iter=15", "train.densify.max_gaussians=800", "semantic.autoencoder.epochs=10",
             "train.init.max_points=300", "priors.masks.provider=gt"]
 
 

@@ -75,7 +75,7 @@ def _tiny_run(method: str) -> Path:
     out = _base_dir() / f"run_{method}"
     args = ["train", "--method", method, "--scene", str(_tiny_scene()), "--preset", "cpu-small", "--out", str(out),
             "--set", "train.iterations=2", "--set", "train.eval_every=0", "--set", "priors.masks.provider=gt",
-            "--set", "gaussiands.autoencoder.epochs=2", "--no-progress", "--quiet"]
+            "--set", "semantic.autoencoder.epochs=2", "--no-progress", "--quiet"]
     if main(args) != 0:
         raise RuntimeError(f"hostile battery: could not train the tiny {method} run")
     return out

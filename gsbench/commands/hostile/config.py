@@ -175,8 +175,8 @@ CASES: list[Hostile] = [
     _case("--set train.background=[]", _set("train.background=[]"), "train.background", "a list of 3 numbers"),
     _case("--set train.background=[1e9,-5,0]", _set("train.background=[1e9,-5,0]"), "train.background[0]",
           "in [0, 1]"),
-    _case("--set gaussiands.autoencoder.hidden=[64,0]", _set("gaussiands.autoencoder.hidden=[64,0]"),
-          "gaussiands.autoencoder.hidden[1]", "in [1, 8192]"),
+    _case("--set semantic.autoencoder.hidden=[64,0]", _set("semantic.autoencoder.hidden=[64,0]"),
+          "semantic.autoencoder.hidden[1]", "in [1, 8192]"),
     _case("--set priors.masks.model_overrides=[1]", _set("priors.masks.model_overrides=[1]"),
           "priors.masks.model_overrides[0]", "must be a str"),
     # a run folder's config.json
