@@ -342,10 +342,10 @@ def test_the_yaml_reader_gives_pythons_parser_trees_for_every_shipped_file():
     import yaml
 
     import gsbench
-    from gsbench import config
+    from gsbench import config, yaml_reader
 
     class PythonLoader(yaml.SafeLoader):      # the same resolvers, PyYAML's Python parser
-        yaml_implicit_resolvers = config._Loader.yaml_implicit_resolvers
+        yaml_implicit_resolvers = yaml_reader._Loader.yaml_implicit_resolvers
 
     load_yaml = config.load_yaml
     files = sorted(Path(gsbench.__file__).parent.rglob("*.yaml"))

@@ -37,6 +37,7 @@ FLOORS: dict[str, int] = {
     "gsbench.results": 0,          # the results.json schema
     "gsbench.config": 0,
     "gsbench.config_keys": 0,
+    "gsbench.yaml_reader": 0,      # the one YAML reader (budgets) and short texts for messages
     "gsbench.method_table": 0,     # method names and specs as data (no method imported)
     "gsbench.environment": 0,      # machine facts and peak memory
     "gsbench.numerics": 0,         # NUMERICS_VERSION: which generation of numbers a run belongs to

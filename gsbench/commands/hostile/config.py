@@ -14,8 +14,8 @@ from typing import Callable, Optional
 
 from gsbench.collect import read_collected
 from gsbench.commands.hostile import Hostile, tiny_run, tiny_scene
-from gsbench.config import MAX_YAML_DEPTH, MAX_YAML_NODES
 from gsbench.store import MAX_JSON_BYTES, MAX_JSON_DEPTH
+from gsbench.yaml_reader import MAX_YAML_DEPTH, MAX_YAML_NODES
 
 AREA = "config"
 DEEP_JSON = "[" * 100_000 + "]" * 100_000      # 100,000 levels: past Python's recursion limit
