@@ -3,7 +3,7 @@
     get_method(name) -> Method class        # name: any of METHODS
 
 Which methods exist is not listed here: each method registers through its spec module beside it
-(`methods/*_spec.py`, `methods/gaussiands/spec.py`), and the ground-floor table
+(`methods/<name>_spec.py`, or `spec.py` in a method's own folder), and the ground-floor table
 gsbench/method_table.py discovers them (the built-in specs, then the `gsbench.methods` entry points
 of installed plugins); METHODS reads the registered names. Importing this package does not import
 torch: `Method` and the method classes load on first use.

@@ -5,7 +5,7 @@ Every method in gsbench is a Gaussian field plus, for semantic methods, a frozen
 and the id of the feature provider that embeds text. The harness owns the training loop
 (gsbench/runs/training.py); a method prepares its data and yields its optimisation phases:
 
-    m = get_method("gaussiands")()
+    m = get_method(config["method"])()
     gsbench.runs.training.train_method(m, scene, run_dir, config)   # runs m.train_phases(...), writes the log
                                                                 # and checkpoints into run_dir
     m.save(run_dir / "model.pt"); m = Method.load(run_dir / "model.pt")

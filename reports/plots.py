@@ -105,6 +105,18 @@ def run_label(res: Results, rid: str) -> str:
     return " ".join(parts)
 
 
+def run_labels(res: Results, run_ids: list[str]) -> dict[str, str]:
+    """run_label of each run; runs whose labels collide (they differ only outside the grid axes, e.g. by
+    preset or schedule) get their run folder's name, or their config key, appended."""
+    labels = {rid: run_label(res, rid) for rid in run_ids}
+    shared = {v for v in labels.values() if list(labels.values()).count(v) > 1}
+    for rid in [r for r in run_ids if labels[r] in shared]:
+        folder = Path(str(res.runs.at[rid, "run_dir"])).name
+        tag = folder if folder != rid else str(res.runs.at[rid, "config_key"])[:8]
+        labels[rid] = f"{labels[rid]} [{tag}]"
+    return labels
+
+
 def _fmt(v: Any) -> str:
     if isinstance(v, float):
         return f"{v:g}"
@@ -147,13 +159,13 @@ def plot_time_curves(res: Results, study: Any, run_ids: list[str], path: Path) -
     if not panels:
         return None, notes
     fig, axes = plt.subplots(1, len(panels), figsize=(6.6 * len(panels), 4.8), squeeze=False)
-    many = len(run_ids) > 10
+    many, labels = len(run_ids) > 10, run_labels(res, run_ids)
     cmap = plt.cm.tab10 if not many else plt.cm.viridis
     color = {rid: cmap(i % 10 / 9.0 if not many else i / max(len(run_ids) - 1, 1)) for i, rid in enumerate(run_ids)}
     front_colors = ["crimson", "darkorange", "purple", "saddlebrown", "teal", "olive"]
     for ax, (title, unit, curves, finals) in zip(axes[0], panels):
         for rid in run_ids:
-            lab = None if many else run_label(res, rid)
+            lab = None if many else labels[rid]
             if rid in curves:
                 xs, ys = curves[rid]
                 ax.plot(
@@ -185,7 +197,7 @@ def plot_time_curves(res: Results, study: Any, run_ids: list[str], path: Path) -
             ax.plot(fx, fy, "D", color=fc, ms=9, mfc="none", mew=1.6)
             if many:
                 for r in front:
-                    ax.annotate(run_label(res, r), finals[r], fontsize=6, xytext=(4, 4), textcoords="offset points")
+                    ax.annotate(labels[r], finals[r], fontsize=6, xytext=(4, 4), textcoords="offset points")
         ax.set_xlabel("training wall time (s)")
         ax.set_ylabel(unit)
         ax.set_title(f"{title} over training time")

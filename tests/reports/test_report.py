@@ -358,3 +358,17 @@ def test_unknown_study_gets_generic_table(tmp_path: Path):
     assert [r.cells[0].plain() for r in diff.rows] == [
         "-1.00 [n/a: one seed] (n=1, paired)", "+2.00 [n/a: one seed] (n=1, paired)", "reference",
         "+3.00 [n/a: one seed] (n=1, paired)"]
+
+
+def test_runs_that_differ_only_by_preset_get_distinct_legend_labels(tmp_path: Path):
+    from gsbench.reports.plots import run_labels
+    root = tmp_path / "runs"
+    for name in ("vanilla_cpu-small", "vanilla_cpu-medium"):
+        write_run(root, name, method="vanilla", scene="dtu", metrics={"psnr": 20.0})
+    write_run(root, "other", method="gaussiands", scene="dtu", metrics={"psnr": 21.0})
+    res = Results(collect(root))
+    labels = run_labels(res, list(res.runs.index))
+    assert len(set(labels.values())) == 3
+    tagged = sorted(v for v in labels.values() if "[" in v)
+    assert len(tagged) == 2 and tagged[0].endswith("[vanilla_cpu-medium]") and tagged[1].endswith("[vanilla_cpu-small]")
+    assert not any("[" in v for rid, v in labels.items() if res.runs.at[rid, "method"] == "gaussiands")
