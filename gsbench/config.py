@@ -222,6 +222,12 @@ def apply_overrides(tree: dict, overrides: Mapping[str, Any], where: str = "--se
     return tree
 
 
+def shipped_presets() -> list[str]:
+    """The names of the presets gsbench ships (gsbench/configs/*.yaml but default.yaml), sorted: the one
+    list, read from the folder, so a new preset file is everywhere a preset is listed."""
+    return sorted(x.stem for x in CONFIG_DIR.glob("*.yaml") if x.stem != "default")
+
+
 def preset_path(preset: str | Path) -> Path:
     """A shipped preset name or a path to a YAML file."""
     p = Path(preset)
@@ -231,8 +237,8 @@ def preset_path(preset: str | Path) -> Path:
         raise InputError(f"preset {str(preset)!r}: file not found")
     q = CONFIG_DIR / f"{preset}.yaml"
     if not q.exists():
-        names = sorted(x.stem for x in CONFIG_DIR.glob("*.yaml") if x.stem != "default")
-        raise InputError(f"unknown preset {str(preset)!r} (no {q}); presets: {', '.join(names)} or a .yaml path")
+        raise InputError(f"unknown preset {str(preset)!r} (no {q}); presets: {', '.join(shipped_presets())} "
+                         "or a .yaml path")
     return q
 
 
@@ -394,6 +400,7 @@ __all__ = [
     "load_yaml_file",
     "short_repr",
     "preset_path",
+    "shipped_presets",
     "default_tree",
     "flatten",
     "get_dotted",

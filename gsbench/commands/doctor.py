@@ -11,13 +11,11 @@ import argparse
 import os
 import platform
 
-from gsbench.config import load_config
+from gsbench.config import load_config, shipped_presets
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.render import resolve_backend
 from gsbench.render.gsplat_ext import NEEDS_BUILD, build_gsplat_extension, gsplat_status
-
-PRESETS = ("default", "cpu-small", "cpu-medium", "cpu-real", "paper")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -69,7 +67,7 @@ def _numba_lines() -> list[str]:
 
 def _auto_lines() -> list[str]:
     lines = ["auto picks (train.device and backend as each preset sets them):"]
-    for preset in PRESETS:
+    for preset in ["default", *shipped_presets()]:
         cfg = load_config("gaussiands", None if preset == "default" else preset, [])
         want = f"train.device={cfg['train'].get('device', 'auto')}, backend={cfg.get('backend', 'auto')}"
         try:

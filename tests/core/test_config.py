@@ -121,7 +121,7 @@ from gsbench import config_keys  # noqa: E402
 from gsbench.cli import build_parser  # noqa: E402
 from gsbench.commands.ablate import grid_from_args  # noqa: E402
 from gsbench.commands.train import config_from_args  # noqa: E402
-from gsbench.config import default_tree, flatten, load_tree, validate  # noqa: E402
+from gsbench.config import default_tree, flatten, load_tree, shipped_presets, validate  # noqa: E402
 from gsbench.grids import cell_config, load_grid  # noqa: E402
 
 ONE_CELL_GRID = """study: custom
@@ -276,8 +276,10 @@ def test_a_preset_file_works_in_train_and_as_a_grid_base_preset(tmp_path):
 def test_every_rule_names_a_key_of_default_yaml_and_shipped_configs_pass():
     leaves = flatten(default_tree())
     assert set(config_keys.RULES) <= set(leaves)
+    from gsbench.method_table import method_rules
+    assert set(method_rules()) <= set(leaves)          # a spec's rules name keys of its own section
     validate(default_tree())
-    for preset in ("cpu-small", "cpu-medium", "cpu-real", "paper"):
+    for preset in shipped_presets():
         for m in config_keys.METHODS:
             validate(load_config(m, preset))
     assert load_tree("cpu-small")["train"]["iterations"] == 500

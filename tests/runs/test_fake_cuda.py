@@ -15,11 +15,12 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import yaml
 import torch
 
 import gsbench.render.backend_choice as D
 import gsbench.render.gsplat_ext as G
-from gsbench.config import load_config
+from gsbench.config import load_config, shipped_presets
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.train.render_backend import prebuild_for
@@ -27,8 +28,7 @@ from gsbench.render.gsplat_ext import GsplatStatus
 from paths import REPO_ROOT
 
 ROOT = REPO_ROOT
-CPU_PRESETS = ("cpu-small", "cpu-medium", "cpu-real")     # they pin backend: cpu
-GPU_PRESETS = (None, "paper")                 # backend auto
+SHIPPED = [None, *shipped_presets()]           # None: default.yaml alone
 REAL_GSPLAT_AVAILABLE = D.gsplat_available
 
 
@@ -59,17 +59,19 @@ def _resolve(cfg: dict) -> tuple[str, str]:
 
 
 # ---------------------------------------------------------------------------- point 1: presets and grids
-@pytest.mark.parametrize("preset", CPU_PRESETS + GPU_PRESETS)
+@pytest.mark.parametrize("preset", SHIPPED)
 @pytest.mark.parametrize("method", ["vanilla", "twostage", "gaussiands"])
 def test_every_shipped_preset_resolves_on_a_cuda_machine(fake_cuda, preset, method):
     cfg = load_config(method, preset, [])
-    want = ("cpu", "cpu") if preset in CPU_PRESETS else ("cuda:0", "gsplat")
-    assert _resolve(cfg) == want
+    pinned = preset is not None and yaml.safe_load((ROOT / "gsbench" / "configs" / f"{preset}.yaml").read_text()
+                                                   ).get("backend") == "cpu"   # the file says cpu
+    assert _resolve(cfg) == (("cpu", "cpu") if pinned else ("cuda:0", "gsplat"))
 
 
-def test_every_shipped_preset_is_listed_here():
-    shipped = {p.stem for p in (ROOT / "gsbench" / "configs").glob("*.yaml")} - {"default"}
-    assert shipped == set(CPU_PRESETS) | {"paper"}
+def test_the_shipped_presets_are_the_files():
+    assert shipped_presets() == sorted(p.stem for p in (ROOT / "gsbench" / "configs").glob("*.yaml")
+                                       if p.stem != "default")
+    assert {"cpu-small", "cpu-medium", "cpu-real", "paper"} <= set(shipped_presets())
 
 
 def test_every_shipped_grid_resolves_on_a_cuda_machine(fake_cuda, tmp_path):
