@@ -91,7 +91,7 @@ def segmentation_camera(scene, i: int, protocol: str, config: dict):
     res, _ = eval_settings(config)
     cam = scene.cameras[i]
     if res == "train":
-        return train_camera(cam, (config.get("train") or {}).get("max_width"))
+        return train_camera(cam, setting(config, "train.max_width"))
     if protocol == "lerf":
         w, h = scene.label_sizes.get(i, (cam.width, cam.height))
     else:

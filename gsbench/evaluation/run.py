@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from gsbench import rundir
+from gsbench.config import setting
 from gsbench.datasets.splits import split_record
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError
@@ -88,7 +89,7 @@ def _memory(summary: dict, eval_peaks: dict) -> dict:
 
 def requested_protocol(protocol: Optional[str], config: dict) -> str:
     """The protocol argument when given, else the run config's eval.protocol (default auto)."""
-    return protocol or (config.get("eval") or {}).get("protocol") or "auto"
+    return protocol or setting(config, "eval.protocol") or "auto"
 
 
 def evaluate_run(run_dir: str | os.PathLike, protocol: Optional[str] = None, progress: bool = True) -> dict:
@@ -107,7 +108,7 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
     protocol = requested_protocol(protocol, config)
     mode = query_mode(config)
     fs = frame_sets(scene, config)
-    max_width = (config.get("train") or {}).get("max_width")
+    max_width = setting(config, "train.max_width")
     rec_cams = [train_camera(scene.cameras[i], max_width) for i in fs.reconstruction]
     protocols, pskip = resolve_protocols(scene, protocol)
     sets = {p: fs.protocol_sets(p) for p in protocols}
