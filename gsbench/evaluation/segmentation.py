@@ -271,8 +271,8 @@ def segmentation(method, scene, protocols: list[str], sets: dict, config: dict,
     return out
 
 
-def query_mode(config: dict, default: Optional[str] = "encode") -> str:
-    mode = (config.get("query") or {}).get("mode", default)
+def query_mode(config: dict) -> str:
+    mode = setting(config, "query.mode")
     if mode not in QUERY_MODES:
         raise InputError(f"query.mode must be one of {', '.join(QUERY_MODES)}, got {mode!r}")
     return mode
