@@ -18,10 +18,11 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from gsbench.config_keys import NOISE_SEVERITIES, NOISE_TYPES
 from gsbench.errors import InputError
 
-NOISE_KINDS = ("gaussian", "poisson", "motion_blur", "salt_pepper")
-SEVERITIES = (0, 1, 2, 3, 4, 5)
+NOISE_KINDS = tuple(k for k in NOISE_TYPES if k is not None)   # config_keys declares them (None: no noise)
+SEVERITIES = NOISE_SEVERITIES
 LEVELS = {
     "gaussian": (0.0, 0.01, 0.02, 0.05, 0.10, 0.20),
     "poisson": (np.inf, 1000.0, 300.0, 100.0, 30.0, 10.0),

@@ -17,9 +17,9 @@ from __future__ import annotations
 import numpy as np
 
 from gsbench.config import setting
+from gsbench.config_keys import HOLDOUTS as HOLDOUT_CHOICES
 from gsbench.errors import InputError
 
-HOLDOUT_CHOICES = ("every-8", "none")
 VIEWS_RULE = "round(linspace(0, n - 1, N)), halves to even, over the n views the hold-out leaves (RegNeRF)"
 
 

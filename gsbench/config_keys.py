@@ -3,10 +3,12 @@
 A key's type comes from gsbench/configs/default.yaml (a bool default takes only true/false, a
 number default only numbers, ...). This table adds ranges and choices, and the type of keys whose
 default is null. A key of default.yaml without a rule here is type-checked only. A method's own
-section is not here: its spec declares its defaults and rules (gsbench.method_table.MethodSpec). The choices are
-spelled out here (not imported) so that reading a config imports no method, renderer or model library
-(this module is on the ground floor, docs/architecture.md); tests/core/test_config.py checks that they
-agree with the code that consumes them. The method names are read live from gsbench.method_table.
+section is not here: its spec declares its defaults and rules (gsbench.method_table.MethodSpec). The choice lists
+are declared here, once, and the modules that consume them import them from here (priors, render,
+evaluation, datasets): reading a config must import no method, renderer or model library (this
+module is on the ground floor, docs/architecture.md), and those packages load cv2 and the model
+code on import (about a second), so the declaration cannot live in them. The method names are read
+live from gsbench.method_table.
 """
 from __future__ import annotations
 

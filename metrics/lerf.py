@@ -37,6 +37,7 @@ from typing import Any, Sequence
 import cv2
 import numpy as np
 
+from gsbench.config_keys import LERF_KERNEL_MODES
 from gsbench.errors import InputError
 
 from ._common import as_mask, finite_float, mean_or_none, pixel_text_cosines, to_numpy, unit_rows
@@ -52,7 +53,6 @@ LERF_IMPL = "lerf-ovs/langsplat/v2"   # v2: empty-GT pairs counted (EMPTY_GT_RUL
 EMPTY_UNION_IOU = 1.0   # IoU of a pair whose GT and prediction are both empty (the reference: NaN)
 EMPTY_GT_RULE = "an empty GT mask is scored |P & G| / |P | G| (0 unless the prediction is empty too, then 1)"
 LERF_REFERENCE_WIDTH = 985    # width of the LERF-OVS label images the 30 px / 7 px kernels were made for
-LERF_KERNEL_MODES = ("reference", "auto")
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,10 @@ from dataclasses import dataclass
 
 from gsbench.camera import training_size
 from gsbench.config import setting
+from gsbench.config_keys import EVAL_RESOLUTIONS as RESOLUTIONS
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
 from gsbench.metric_table import FRAME_SETS
-
-RESOLUTIONS = ("reference", "train")
 
 
 @dataclass

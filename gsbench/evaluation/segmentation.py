@@ -19,7 +19,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from gsbench.config import setting
-from gsbench.config_keys import QUERY_MODES
+from gsbench.config_keys import PROTOCOLS, QUERY_MODES
 from gsbench.errors import InputError
 from gsbench.metric_table import FRAME_SET_SUFFIX, SEG_BASES, seg_metric
 from gsbench.metrics import lerf, ovs3d, pixel_norms, pixel_text_cosines
@@ -30,7 +30,6 @@ from .frames import eval_settings, ovs3d_downsample, segmentation_camera, size_t
 from .labels import class_masks, scene_label_masks
 
 log = logging.getLogger(__name__)
-PROTOCOLS = ("auto", "lerf", "3dovs")
 
 
 def resolve_protocols(scene, protocol: str) -> tuple[list[str], dict]:

@@ -42,6 +42,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from gsbench.config import check_key, setting
+from gsbench.config_keys import DEPTH_PROVIDERS
 from gsbench.datasets.noise import apply_noise
 from gsbench.device import default_device
 from gsbench.errors import InputError
@@ -50,7 +51,6 @@ from gsbench.priors import warp as W
 from gsbench.priors.weights import require_weights
 from gsbench.resize import resize_nearest
 
-DEPTH_PROVIDERS = ("gt", "sparse", "sfm", "depth-anything", "none")
 DEPTH_KINDS = ("disparity", "depth", "metric")
 WORKING_SIZE = 518          # short side of the simulated estimator's working image (pixels)
 EDGE_SIGMA_PX = 0.5         # edge blur at severity 0, in working pixels (see docs/priors.md)

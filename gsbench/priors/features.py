@@ -22,6 +22,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from gsbench.config_keys import FEATURE_PROVIDERS
 from gsbench.device import default_device
 from gsbench.errors import InputError
 from gsbench.priors import clipspace as C
@@ -32,7 +33,7 @@ from gsbench.resize import resize_nearest
 FEATURE_DIM = C.DIM
 CANONICAL_NEGATIVES = C.CANONICAL_NEGATIVES
 UNLABELLED = C.BACKGROUND
-FEATURE_PROVIDERS = ("text-aligned", "openclip")
+
 CONTEXT_GROW = 0.5
 
 

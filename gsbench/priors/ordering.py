@@ -21,8 +21,7 @@ from typing import Sequence
 import numpy as np
 
 from gsbench.camera import Camera
-
-ORDERINGS = ("pose", "random", "filename")
+from gsbench.config_keys import ORDERINGS
 
 
 def camera_centers(cameras: Sequence[Camera], view_ids: Sequence[int]) -> np.ndarray:

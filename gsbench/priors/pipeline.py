@@ -21,6 +21,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from gsbench import rundir
+from gsbench.config_keys import MASK_PROVIDERS, PROPAGATORS
 from gsbench.errors import InputError
 from gsbench.metrics import ordering as MO
 from gsbench.priors import depth as D
@@ -35,8 +36,6 @@ from gsbench.priors.ordering import ORDERINGS, camera_centers, order_views
 from gsbench.priors.sfm_depth import points_digest
 from gsbench.resize import resize_area, resize_nearest
 
-MASK_PROVIDERS = ("simulated", "gt", "sam2")
-PROPAGATORS = ("flow", "reproject")
 PIPELINE_VERSION = 2
 
 

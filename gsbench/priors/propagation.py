@@ -42,6 +42,7 @@ from scipy.optimize import linear_sum_assignment
 from tqdm.auto import tqdm
 
 from gsbench.camera import Camera
+from gsbench.config_keys import NEW_OBJECT_RULES
 from gsbench.priors import warp as W
 
 DEFAULT_MIN_IOU = 0.3
@@ -49,7 +50,6 @@ MIN_TRACK_AREA_FRAC = 0.001
 FB_ALPHA = 0.01
 FB_BETA = 0.5
 MIN_FLOW_SIDE = 16
-NEW_OBJECT_RULES = ("uncarried", "unmatched")
 
 # warp(prev_view, cur_view, prev_labels) -> (labels in cur frame (-1 none), known bool map)
 Warper = Callable[[int, int, np.ndarray], tuple[np.ndarray, np.ndarray]]

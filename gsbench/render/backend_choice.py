@@ -17,12 +17,13 @@ import logging
 
 import torch
 
+from gsbench.config_keys import BACKENDS as BACKEND_CHOICES
 from gsbench.errors import InputError
 from gsbench.render.gsplat_ext import gsplat_status
 
 log = logging.getLogger(__name__)
 
-BACKENDS = ("torch", "cpu", "gsplat")     # the concrete backends; `auto` resolves to one of them
+BACKENDS = tuple(b for b in BACKEND_CHOICES if b != "auto")   # the concrete backends; `auto` resolves to one
 
 
 def gsplat_available() -> bool:

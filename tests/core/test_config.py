@@ -286,6 +286,8 @@ def test_every_rule_names_a_key_of_default_yaml_and_shipped_configs_pass():
 
 
 def test_declared_choices_agree_with_the_code_that_consumes_them():
+    """One declaration per choice list: the consumers use config_keys' object (or one derived from it);
+    a method's own lists are its spec's, kept equal to the code that implements them."""
     from gsbench.datasets.noise import NOISE_KINDS, SEVERITIES
     from gsbench.datasets.splits import HOLDOUT_CHOICES
     from gsbench.evaluation.frames import RESOLUTIONS
@@ -299,21 +301,15 @@ def test_declared_choices_agree_with_the_code_that_consumes_them():
     from gsbench.priors.propagation import NEW_OBJECT_RULES
     from gsbench.render import BACKENDS
     from gsbench.train.losses import DEPTH_FORMULATIONS, DS_AVERAGES
-    assert set(config_keys.HOLDOUTS) == set(HOLDOUT_CHOICES)
-    assert set(config_keys.EVAL_RESOLUTIONS) == set(RESOLUTIONS)
-    assert set(config_keys.LERF_KERNEL_MODES) == set(LERF_KERNEL_MODES)
-    assert set(config_keys.BACKENDS) == {"auto", *BACKENDS}
+    for used, declared in ((HOLDOUT_CHOICES, "HOLDOUTS"), (RESOLUTIONS, "EVAL_RESOLUTIONS"),
+                           (LERF_KERNEL_MODES, "LERF_KERNEL_MODES"), (DEPTH_PROVIDERS, "DEPTH_PROVIDERS"),
+                           (MASK_PROVIDERS, "MASK_PROVIDERS"), (FEATURE_PROVIDERS, "FEATURE_PROVIDERS"),
+                           (PROPAGATORS, "PROPAGATORS"), (NEW_OBJECT_RULES, "NEW_OBJECT_RULES"),
+                           (ORDERINGS, "ORDERINGS"), (PROTOCOLS, "PROTOCOLS"), (SEVERITIES, "NOISE_SEVERITIES")):
+        assert used is getattr(config_keys, declared), declared
+    assert (None, *NOISE_KINDS) == config_keys.NOISE_TYPES and ("auto", *BACKENDS) == config_keys.BACKENDS
     assert set(gaussiands_spec.DEPTH_FORMULATIONS) == set(DEPTH_FORMULATIONS)   # the method's own keys: its spec
     assert set(gaussiands_spec.DS_AVERAGES) == set(DS_AVERAGES)
-    assert set(config_keys.DEPTH_PROVIDERS) == set(DEPTH_PROVIDERS)
-    assert set(config_keys.MASK_PROVIDERS) == set(MASK_PROVIDERS)
-    assert set(config_keys.FEATURE_PROVIDERS) == set(FEATURE_PROVIDERS)
-    assert set(config_keys.PROPAGATORS) == set(PROPAGATORS)
-    assert set(config_keys.NEW_OBJECT_RULES) == set(NEW_OBJECT_RULES)
-    assert set(config_keys.ORDERINGS) == set(ORDERINGS)
-    assert set(config_keys.NOISE_TYPES) == {None, *NOISE_KINDS}
-    assert set(config_keys.NOISE_SEVERITIES) == set(SEVERITIES)
-    assert set(config_keys.PROTOCOLS) == set(PROTOCOLS)
 
 
 def test_one_config_hash_rule_for_run_ids_and_config_keys():
