@@ -158,7 +158,7 @@ class Method:
     def feature_provider(self):
         if self._feature_provider is None:
             dev = self.field.means.device if self.field is not None else resolve_device(self.config)
-            self._feature_provider = get_feature_provider(self.config["priors"]["features"], device=str(dev))
+            self._feature_provider = get_feature_provider(setting(self.config, "priors.features"), device=str(dev))
         return self._feature_provider
 
     def embed_text(self, texts: list[str], mode: str = "encode") -> Optional[torch.Tensor]:
@@ -250,7 +250,7 @@ def _check_mode(mode: str) -> None:
 
 # ---------------------------------------------------------------------------- shared data preparation
 def cache_dir_for(config: dict, run_dir: Path) -> Path:
-    c = config["priors"].get("cache_dir")
+    c = setting(config, "priors.cache_dir")
     return Path(c) if c else Path(run_dir).resolve().parent / rundir.CACHE_DIRNAME
 
 

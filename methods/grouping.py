@@ -32,6 +32,7 @@ from typing import Optional
 import numpy as np
 import torch
 
+from gsbench.config import setting
 from gsbench.errors import InputError
 from gsbench.gaussians import SH_C0
 from gsbench.methods.base import Method, Phases, _check_mode, _unit, fit_priors
@@ -174,7 +175,7 @@ class GaussianGrouping(Method):
         if threshold is not None:
             log.info("grouping: removal by class probability > grouping.removal_threshold; the latent-cosine "
                      "threshold %s does not apply", threshold)
-        thr = float(self.config["grouping"]["removal_threshold"])
+        thr = float(setting(self.config, "grouping.removal_threshold"))
         sel = self.query_classes(query)
         fld = self._require_field()
         with torch.no_grad():
@@ -209,13 +210,12 @@ class GaussianGrouping(Method):
                      progress: bool = True) -> Phases:
         run_dir = Path(run_dir)
         dev = self._prepare(config)
-        g = config["grouping"]
-        seed = int(config["seed"])
+        seed = int(setting(config, "seed"))
         semantic = bool(uses(config)["semantics"])
         views, (W, H) = load_views(scene, config, device=dev)
         train_ids = sorted(views.cameras)
         ckpt = resume
-        dim = int(g["identity_dim"]) if semantic else 0
+        dim = int(setting(config, "grouping.identity_dim")) if semantic else 0
         targets: Mapping[int, torch.Tensor] = {}
         has_any: dict[int, bool] = {}
         if semantic:
@@ -230,7 +230,7 @@ class GaussianGrouping(Method):
         gen = torch.Generator(device=dev).manual_seed(seed + 3)
         resumed = ckpt if (ckpt is not None and ckpt.get("phase") == "main") else None
         if semantic:
-            opt = Adam(self.classifier.parameters(), lr=float(g["classifier_lr"]))
+            opt = Adam(self.classifier.parameters(), lr=float(setting(config, "grouping.classifier_lr")))
             extra = (resumed or {}).get("extra", {})
             if "classifier" in extra:
                 self.classifier.load_state_dict(extra["classifier"])
@@ -258,7 +258,6 @@ class GaussianGrouping(Method):
         """The priors' propagated masks as per-pixel class targets (tracks -> classes, the tracks' feature
         table, a seeded classifier), and per view whether it has any target at all."""
         W, H = size
-        g = config["grouping"]
         pri = fit_priors(scene, config, run_dir, progress=progress)
         self.providers = dict(pri.providers)
         self.info["priors_stats"] = dict(pri.stats)
@@ -266,7 +265,7 @@ class GaussianGrouping(Method):
         if pri.masks is None or pri.mask_features is None:
             raise ValueError(f"grouping: the identity loss is on but the priors gave no masks/features "
                              f"({pri.skipped})")
-        self.tracks, C = track_classes({v: pri.masks[v] for v in train_ids}, g["num_classes"])
+        self.tracks, C = track_classes({v: pri.masks[v] for v in train_ids}, setting(config, "grouping.num_classes"))
         feat_dim = len(next(iter(pri.mask_features.values())))
         self.table = track_table(pri.mask_features, self.tracks, C, feat_dim).to(dev)
         targets: Mapping[int, torch.Tensor] = {}
@@ -277,7 +276,7 @@ class GaussianGrouping(Method):
             targets[v] = torch.as_tensor(class_map(m, self.tracks)).reshape(-1)
         targets = place(targets, dev, data_on(config))
         with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(int(config["seed"]))
+            torch.manual_seed(int(setting(config, "seed")))
             self.classifier = torch.nn.Linear(dim, C).to(dev)
         self.info["tracks"] = len(self.tracks)
         self.info["num_classes"] = C
@@ -290,26 +289,32 @@ class GaussianGrouping(Method):
         """The per-step loss (module docstring): L_rec, the identity loss on views with targets, and every
         `reg3d.interval` steps (the context's step) the 3D neighbour KL over sampled Gaussians (the
         context's parameters)."""
-        g = config["grouping"]
-        lam_dssim = float(config["train"]["lambda_dssim"])
-        on, lam, r3 = g["losses"], g["lambdas"], g["reg3d"]
+        # every setting read once here, not per step
+        lam_dssim = float(setting(config, "train.lambda_dssim"))
+        on_identity = setting(config, "grouping.losses.identity")
+        on_reg3d = setting(config, "grouping.losses.reg3d")
+        lam_identity = setting(config, "grouping.lambdas.identity")
+        lam_reg3d = setting(config, "grouping.lambdas.reg3d")
+        r3_interval = int(setting(config, "grouping.reg3d.interval"))
+        r3_k = int(setting(config, "grouping.reg3d.k"))
+        r3_max_points = int(setting(config, "grouping.reg3d.max_points"))
+        r3_sample_size = int(setting(config, "grouping.reg3d.sample_size"))
 
         def loss_fn(ctx: StepContext) -> LossResult:
             vid, out = ctx.view_id, ctx.out
             rec = reconstruction_loss(out.rgb, ctx.gt, lam_dssim)
             res = LossResult(rec, {"rec": rec.detach()}, {}, {"rec": rec.detach()})
-            if semantic and on["identity"]:
+            if semantic and on_identity:
                 if not has_any[vid]:
                     res.skipped["identity"] = 1
                 else:
-                    res.add("identity", lam["identity"],
+                    res.add("identity", lam_identity,
                             identity_loss(self.classifier(out.features.reshape(-1, dim)), targets[vid]))
-            if semantic and on["reg3d"] and ctx.step % int(r3["interval"]) == 0:
+            if semantic and on_reg3d and ctx.step % r3_interval == 0:
                 p = ctx.params
-                pool, samples = sample_reg3d(int(p["means"].shape[0]), int(r3["max_points"]),
-                                             int(r3["sample_size"]), gen)
+                pool, samples = sample_reg3d(int(p["means"].shape[0]), r3_max_points, r3_sample_size, gen)
                 probs = torch.softmax(self.classifier(p["features"][pool]), dim=-1)
-                res.add("reg3d", lam["reg3d"], neighbour_kl(p["means"].detach()[pool], probs, int(r3["k"]), samples))
+                res.add("reg3d", lam_reg3d, neighbour_kl(p["means"].detach()[pool], probs, r3_k, samples))
             res.terms["total"] = res.total.detach()
             return res
 

@@ -2,6 +2,7 @@
 scene must feed, and its budget (methods/grouping.py is the method)."""
 from __future__ import annotations
 
+from gsbench.config import setting
 from gsbench.config_keys import Rule, at_least, positive, unit
 from gsbench.method_table import MethodSpec
 from gsbench.methods.rules import Drop, semantic_source, switch_off
@@ -58,12 +59,12 @@ def resolve(cfg: dict, scene, drop: Drop) -> None:
 
 
 def uses(cfg: dict) -> dict:
-    return {"depth_prior": False, "semantics": bool(cfg["grouping"]["losses"]["identity"])}
+    return {"depth_prior": False, "semantics": bool(setting(cfg, "grouping.losses.identity"))}
 
 
 def budget(cfg: dict) -> dict:
     """Joint training: every step is also a semantic step when the identity loss is on."""
-    steps = int(cfg["train"]["iterations"])
+    steps = int(setting(cfg, "train.iterations"))
     sem = uses(cfg)["semantics"]
     return {"rgb_steps": steps, "semantic_steps": steps if sem else 0, "schedule": "joint" if sem else "none"}
 

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from gsbench.camera import training_size
+from gsbench.config import setting
 from gsbench.datasets import load_scene
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
@@ -38,12 +39,12 @@ def get_method(name: str) -> type:
 
 def uses(config: dict) -> dict:
     """What the (resolved) config feeds: {"depth_prior": bool, "semantics": bool}, as its method registered."""
-    return load_target(get_spec(config["method"]).uses)(config)
+    return load_target(get_spec(setting(config, "method")).uses)(config)
 
 
 def budget(config: dict) -> dict:
     """The training budget of a (resolved) config, by its method's rule: {"rgb_steps", "semantic_steps"}."""
-    return load_target(get_spec(config["method"]).budget)(config)
+    return load_target(get_spec(setting(config, "method")).budget)(config)
 
 
 # ---------------------------------------------------------------------------- per-scene resolution
@@ -54,7 +55,7 @@ def resolve_for_scene(config: dict, scene) -> tuple[dict, dict]:
     Resolving a resolved config again gives the same losses and priors.
     """
     cfg = copy.deepcopy(config)
-    spec = get_spec(cfg["method"])
+    spec = get_spec(setting(cfg, "method"))
     if spec.section is not None and not isinstance(cfg.get(spec.section), dict):
         raise InputError(f"method {spec.name}: the config has no {spec.section!r} section")
     dropped: dict[str, str] = {}
@@ -92,12 +93,12 @@ def build_priors_request(config: dict, scene) -> Optional[dict]:
     train_ids, _ = split_ids(scene, cfg)   # the views the method trains on (train.holdout)
     if not train_ids:
         return None
-    spec = get_spec(cfg["method"])
+    spec = get_spec(setting(cfg, "method"))
     use = load_target(spec.uses)(cfg)
-    w, h = training_size(scene.cameras[train_ids[0]], cfg["train"].get("max_width"))
-    return {"scene_path": str(scene.path), "priors": cfg["priors"], "view_ids": sorted(train_ids),
+    w, h = training_size(scene.cameras[train_ids[0]], setting(cfg, "train.max_width"))
+    return {"scene_path": str(scene.path), "priors": setting(cfg, "priors"), "view_ids": sorted(train_ids),
             "size": [w, h], "need_depth": bool(use["depth_prior"]), "need_sem": bool(use["semantics"]),
-            "per_frame": bool(spec.per_frame_masks), "seed": int(cfg["seed"])}
+            "per_frame": bool(spec.per_frame_masks), "seed": int(setting(cfg, "seed"))}
 
 
 __all__ = ["MethodSpec", "METHODS", "register", "unregister", "get_spec", "get_method", "method_sort_key", "uses",

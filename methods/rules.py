@@ -19,7 +19,7 @@ def switch_off(on: dict, keys: tuple[str, ...], section: str, why: str, drop: Dr
 
 def depth_source(cfg: dict, scene) -> tuple[bool, str]:
     """Can the scene feed the configured depth provider? (ok, reason when not)."""
-    prov = cfg["priors"]["depth"]["provider"]
+    prov = setting(cfg, "priors.depth.provider")
     if prov in (None, "none"):
         return False, "priors.depth.provider=none"
     if prov == "gt" and not scene.has_depth:
@@ -37,8 +37,8 @@ def semantic_source(cfg: dict, scene) -> tuple[bool, str]:
     labels at all, or labels on a view that is trained on."""
     from gsbench.datasets.splits import split_ids  # lazy: start-up (listing methods loads no priors)
     from gsbench.priors.labels import SOURCE_TEXT, label_source, labelled_views  # lazy: start-up (as above)
-    m = cfg["priors"]["masks"]["provider"]
-    f = cfg["priors"]["features"]["provider"]
+    m = setting(cfg, "priors.masks.provider")
+    f = setting(cfg, "priors.features.provider")
     labels = label_source(scene)
     none = "(no semantics in the scene)"
     if m == "simulated" and not scene.has_instances:
@@ -70,7 +70,7 @@ def resolve_semantics(cfg: dict, scene, drop: Drop, also: Optional[tuple[dict, s
     if not ok:
         switch_off(cfg["semantic"], ("loss",), "semantic", why, drop)
         switch_off(own, keys, section, why, drop)
-    if not (cfg["semantic"]["loss"] or any(own[k] for k in keys)):
+    if not (setting(cfg, "semantic.loss") or any(own[k] for k in keys)):
         names = " and ".join(["semantic.loss", *(f"{section}.{k}" for k in keys)])
         reason = why if not ok else f"nothing uses it ({names} {'are' if keys else 'is'} off)"
         for part in ("priors.masks", "priors.features", "semantic.autoencoder", "semantic_channels"):

@@ -13,6 +13,7 @@ from typing import Optional
 
 import torch
 
+from gsbench.config import setting
 from gsbench.methods.base import Method, Phases, fit_priors
 from gsbench.methods.registry import uses
 from gsbench.methods.twostage_spec import budget, semantic_budget
@@ -43,7 +44,7 @@ class TwoStage(Method):
             rgb_field = None                      # stage 1 finished before the interruption
         else:
             rgb_field = yield make_trainer(config, views, scene, field0, run_dir,
-                                           rgb_loss_fn(float(config["train"]["lambda_dssim"])),
+                                           rgb_loss_fn(float(setting(config, "train.lambda_dssim"))),
                                            phase="rgb", backend=self._backend)
         self.info["device"] = str(dev)
         self.info["budget"] = budget(config)
@@ -52,8 +53,7 @@ class TwoStage(Method):
             self.info["n_gaussians"] = self.field.num
             return
         # ---- stage 2: semantics from per-frame masks on frozen geometry
-        g = config["semantic"]
-        d = int(g["latent_dim"])
+        d = int(setting(config, "semantic.latent_dim"))
         pri = fit_priors(scene, config, run_dir, progress=progress)
         self.providers = dict(pri.providers)
         self.info["priors_stats"] = dict(pri.stats)
@@ -61,8 +61,8 @@ class TwoStage(Method):
             raise ValueError(f"twostage: the priors gave no masks/features ({pri.skipped})")
         ae_state = (ckpt or {}).get("extra", {}).get("autoencoder") if (ckpt or {}).get("phase") == "semantic" else None
         self.autoencoder, self.info["autoencoder"], targets = semantic_targets(
-            pri.masks, pri.mask_features, g["autoencoder"], d, int(config["seed"]), ae_state,
-            {v: (W, H) for v in train_ids}, dev, data_on(config))
+            pri.masks, pri.mask_features, setting(config, "semantic.autoencoder"), d, int(setting(config, "seed")),
+            ae_state, {v: (W, H) for v in train_ids}, dev, data_on(config))
         has_any = {v: bool(targets.has_target[v].any()) for v in train_ids}
         if rgb_field is None:
             sem_field0 = field_from_params(ckpt["params"])

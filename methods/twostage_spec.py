@@ -2,6 +2,7 @@
 registration, what the scene must feed, and its budget (methods/twostage.py is the method)."""
 from __future__ import annotations
 
+from gsbench.config import setting
 from gsbench.config_keys import Rule, at_least
 from gsbench.method_table import MethodSpec
 from gsbench.methods.rules import Drop, resolve_semantics
@@ -20,19 +21,19 @@ def resolve(cfg: dict, scene, drop: Drop) -> None:
 
 
 def uses(cfg: dict) -> dict:
-    return {"depth_prior": False, "semantics": bool(cfg["semantic"]["loss"])}
+    return {"depth_prior": False, "semantics": bool(setting(cfg, "semantic.loss"))}
 
 
 def semantic_budget(cfg: dict) -> int:
     """Stage 2's steps: `twostage.semantic_iterations`, or (null) as many semantic steps as GaussianDS
     takes in the same config (`train.iterations`: each of its joint steps is a semantic step)."""
-    v = cfg["twostage"]["semantic_iterations"]
-    return int(cfg["train"]["iterations"]) if v is None else int(v)
+    v = setting(cfg, "twostage.semantic_iterations")
+    return int(setting(cfg, "train.iterations")) if v is None else int(v)
 
 
 def budget(cfg: dict) -> dict:
     sem = uses(cfg)["semantics"]
-    return {"rgb_steps": int(cfg["train"]["iterations"]), "semantic_steps": semantic_budget(cfg) if sem else 0,
+    return {"rgb_steps": int(setting(cfg, "train.iterations")), "semantic_steps": semantic_budget(cfg) if sem else 0,
             "schedule": "after rgb" if sem else "none"}
 
 

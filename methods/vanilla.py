@@ -4,6 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
+from gsbench.config import setting
 from gsbench.methods.base import Method, Phases
 from gsbench.methods.vanilla_spec import budget
 from gsbench.train.initial_field import scene_init
@@ -30,7 +31,7 @@ class Vanilla(Method):
         field0, how = scene_init(scene, config, 0)
         self.info["init"] = how
         self.field = yield make_trainer(config, views, scene, field0, Path(run_dir),
-                                        rgb_loss_fn(float(config["train"]["lambda_dssim"])),
+                                        rgb_loss_fn(float(setting(config, "train.lambda_dssim"))),
                                         phase="main", backend=self._backend)
         self.info["n_gaussians"] = self.field.num
         self.info["device"] = str(dev)

@@ -2,6 +2,7 @@
 must feed, and its budget. Read by the method table without importing the method (methods/vanilla.py)."""
 from __future__ import annotations
 
+from gsbench.config import setting
 from gsbench.method_table import MethodSpec
 from gsbench.methods.rules import Drop
 
@@ -17,7 +18,7 @@ def uses(cfg: dict) -> dict:
 
 
 def budget(cfg: dict) -> dict:
-    return {"rgb_steps": int(cfg["train"]["iterations"]), "semantic_steps": 0, "schedule": "none"}
+    return {"rgb_steps": int(setting(cfg, "train.iterations")), "semantic_steps": 0, "schedule": "none"}
 
 
 SPEC = MethodSpec(name="vanilla", target="gsbench.methods.vanilla:Vanilla", label="3DGS (vanilla)", section=None,

@@ -11,7 +11,7 @@ import argparse
 import os
 import platform
 
-from gsbench.config import load_config, shipped_presets
+from gsbench.config import load_config, setting, shipped_presets
 from gsbench.device import resolve_device
 from gsbench.errors import InputError
 from gsbench.render import resolve_backend
@@ -69,10 +69,10 @@ def _auto_lines() -> list[str]:
     lines = ["auto picks (train.device and backend as each preset sets them):"]
     for preset in ["default", *shipped_presets()]:
         cfg = load_config("gaussiands", None if preset == "default" else preset, [])
-        want = f"train.device={cfg['train'].get('device', 'auto')}, backend={cfg.get('backend', 'auto')}"
+        want = f"train.device={setting(cfg, 'train.device')}, backend={setting(cfg, 'backend')}"
         try:
             dev = resolve_device(cfg)
-            got = f"{dev}, backend {resolve_backend(cfg.get('backend', 'auto'), dev)}"
+            got = f"{dev}, backend {resolve_backend(setting(cfg, 'backend'), dev)}"
         except InputError as e:
             got = f"error: {e}"
         lines.append(f"  {preset:<11} {want:<38} -> {got}")

@@ -66,10 +66,9 @@ def run_phase(tr: Trainer, run_dir: Path, eval_fn: Optional[Callable[[GaussianFi
         # drop log lines written after the checkpoint (they will be produced again)
         lines = [r for r in read_jsonl(log_path) if r.get("phase") != tr.phase or int(r.get("step", 0)) <= tr.step]
         write_text_atomic(log_path, "".join(json.dumps(r) + "\n" for r in lines))
-    tcfg = tr.tcfg
-    log_every = max(1, int(tcfg["log_every"]))
-    eval_every = int(tcfg.get("eval_every") or 0)
-    ckpt_every = int(tcfg.get("checkpoint_every") or 0)
+    log_every = max(1, int(setting(tr.cfg, "train.log_every")))
+    eval_every = int(setting(tr.cfg, "train.eval_every"))
+    ckpt_every = int(setting(tr.cfg, "train.checkpoint_every"))
     acc: dict = {}          # device tensors (or floats) summed per step, read at log steps only
     acc_w: dict = {}
     acc_n = 0

@@ -9,6 +9,7 @@ import numpy as np
 import torch
 
 from gsbench.camera import Camera
+from gsbench.config import setting
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
 from gsbench.gaussians import SH_C0, GaussianField
@@ -93,7 +94,7 @@ def frustum_points(cameras: list[Camera], near: float, far: float, n: int, seed:
 def init_mode(scene, config: dict) -> str:
     """The concrete init mode: 'auto' = sparse points when the scene has them, else the near/far
     frusta for forward-facing layouts that know their bounds, else a random cube."""
-    mode = config["train"]["init"]["mode"]
+    mode = setting(config, "train.init.mode")
     if mode != "auto":
         return mode
     if scene.has_points:
@@ -106,29 +107,30 @@ def init_mode(scene, config: dict) -> str:
 
 def scene_init(scene, config: dict, feature_dim: int):
     """Initial field from the config's init mode (see `init_mode`); returns (field, how)."""
-    icfg = config["train"]["init"]
     mode = init_mode(scene, config)
     centres = np.stack([c.center for c in scene.cameras])
     centre = centres.mean(0)
-    half = float(scene.extent or 1.0) * float(icfg.get("random_scale", 1.0))
+    half = float(scene.extent or 1.0) * float(setting(config, "train.init.random_scale"))
     pc = getattr(scene, "point_colors", None)
-    sh = int(config["train"]["sh_degree"])
+    sh = int(setting(config, "train.sh_degree"))
+    seed = int(setting(config, "seed"))
+    num_random = int(setting(config, "train.init.num_random"))
     if mode == "frustum":
         meta = getattr(scene, "meta", {}) or {}
         if "near" not in meta or "far" not in meta:
             raise ValueError(f"{scene.path}: train.init.mode=frustum needs the scene's near/far bounds "
                              f"(LLFF poses_bounds)")
         near, far = float(meta["near"]), float(meta["far"])
-        n = max(1, int(icfg["num_random"]))
+        n = max(1, num_random)
         # the cameras the run trains on (train.views, train.holdout), not the scene's whole training split:
         # a few-view run must not start from points spread over views it never sees
         cams = [scene.cameras[i] for i in split_ids(scene, config)[0]]
-        xyz = frustum_points(cams, near, far, n, int(config["seed"]))
-        rgb = np.random.default_rng(int(config["seed"]) + 1).random((n, 3))
-        fld, _ = init_field(xyz, rgb, "points", n, centre, half, sh, feature_dim, int(config["seed"]), None)
+        xyz = frustum_points(cams, near, far, n, seed)
+        rgb = np.random.default_rng(seed + 1).random((n, 3))
+        fld, _ = init_field(xyz, rgb, "points", n, centre, half, sh, feature_dim, seed, None)
         return fld, f"frustum ({n} in the train cameras' frusta, depth {near:.4g}..{far:.4g}, uniform in 1/z)"
-    return init_field(scene.points, pc, mode, int(icfg["num_random"]), centre, half, sh, feature_dim,
-                      int(config["seed"]), icfg.get("max_points"))
+    return init_field(scene.points, pc, mode, num_random, centre, half, sh, feature_dim,
+                      seed, setting(config, "train.init.max_points"))
 
 
 __all__ = ["init_field", "scene_init", "init_mode", "frustum_points", "FORWARD_FACING_LAYOUTS"]

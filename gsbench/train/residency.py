@@ -10,6 +10,7 @@ from typing import Any
 
 import torch
 
+from gsbench.config import setting
 from gsbench.config_keys import DATA_PLACES as PLACES
 
 DEVICE, HOST = PLACES
@@ -70,7 +71,7 @@ def place(values: dict, device: torch.device | str, on: str) -> Mapping:
 
 def data_on(config: dict) -> str:
     """The run's `train.data_on`."""
-    return str(config["train"]["data_on"])
+    return str(setting(config, "train.data_on"))
 
 
 __all__ = ["DEVICE", "HOST", "PLACES", "HostViews", "place", "data_on"]

@@ -25,6 +25,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Protocol
 
 from gsbench.camera import Camera
+from gsbench.config import setting
 from gsbench.render import RenderOutput
 from gsbench.step_timers import timed
 from gsbench.train.densify import DensifyStats, densify_and_prune, reset_opacity
@@ -100,9 +101,10 @@ class DefaultStrategy:
         self.stats.load_state_dict(st)
 
 
-def default_strategy(tcfg: dict, densify: bool = True) -> DefaultStrategy:
+def default_strategy(config: dict, densify: bool = True) -> DefaultStrategy:
     """The strategy of a phase that names none: 3DGS's, on when `densify` and `train.densify.enabled`."""
-    return DefaultStrategy(tcfg["densify"], enabled=bool(densify and tcfg["densify"]["enabled"]))
+    return DefaultStrategy(setting(config, "train.densify"),
+                           enabled=bool(densify and setting(config, "train.densify.enabled")))
 
 
 __all__ = ["Strategy", "DefaultStrategy", "default_strategy"]

@@ -129,27 +129,32 @@ class Trainer:
                  device: Optional[torch.device] = None,
                  extra_optimizer: Optional[Adam] = None, strategy: Optional[Strategy] = None) -> None:
         self.cfg = cfg
-        self.tcfg = cfg["train"]
+        self.tcfg = setting(cfg, "train")
         self.views = views
         self.extent = float(extent) if extent and extent > 0 else 1.0
         self.run_dir = Path(run_dir)
         self.loss_fn = loss_fn
         self.phase = phase
-        self.iterations = int(self.tcfg["iterations"] if iterations is None else iterations)
+        self.iterations = int(setting(cfg, "train.iterations") if iterations is None else iterations)
         # densification: the method's own strategy, or 3DGS's (on when `densify` and train.densify.enabled)
-        self.strategy = strategy if strategy is not None else default_strategy(self.tcfg, densify)
+        self.strategy = strategy if strategy is not None else default_strategy(cfg, densify)
         self.backend = backend
         self.seed = int(seed)
         self.extra_state = extra_state
         # a method's own module trained with the field (e.g. grouping's identity classifier): stepped
         # right after the field's Adam, from the same backward pass; its state travels in extra_state
         self.extra_optimizer = extra_optimizer
-        lr = self.tcfg["lr"]
         self.device = torch.device(device) if device is not None else field.means.device
-        lrs = {"means": lr["position_init"] * self.extent}
+        # the position LR schedule (3DGS's expon_lr), read once: _update_lr applies it every step
+        self._position_lr = (setting(cfg, "train.lr.position_init") * self.extent,
+                            setting(cfg, "train.lr.position_final") * self.extent,
+                            int(setting(cfg, "train.lr.position_max_steps")),
+                            int(setting(cfg, "train.lr.position_delay_steps") or 0),
+                            float(setting(cfg, "train.lr.position_delay_mult")))
+        lrs = {"means": self._position_lr[0]}
         for k, key in LR_KEYS.items():
-            lrs[k] = lr[key]
-        lrs[SH_REST] = float(lr["color"]) * float(setting(cfg, "train.lr.color_rest_factor"))
+            lrs[k] = setting(cfg, f"train.lr.{key}")
+        lrs[SH_REST] = float(setting(cfg, "train.lr.color")) * float(setting(cfg, "train.lr.color_rest_factor"))
         tensors = {k: v.to(self.device) for k, v in field.tensors().items() if v is not None}
         self.sh_max = field.sh_degree or 0
         self.sh_every = int(setting(cfg, "train.sh_increase_every") or 0)
@@ -164,7 +169,7 @@ class Trainer:
         self.view_rng = np.random.default_rng(self.seed)
         self.view_stack: list[int] = []
         self.torch_gen = torch.Generator(device=self.device).manual_seed(self.seed + 1)
-        bg = self.tcfg.get("background") or [0.0, 0.0, 0.0]
+        bg = setting(self.cfg, "train.background")
         self.background = torch.tensor(bg, dtype=torch.float32, device=self.device)
         self.bad_step = torch.zeros((), dtype=torch.long, device=self.device)   # first step with a non-finite loss
         self.strategy.initialize(self)
@@ -224,10 +229,7 @@ class Trainer:
         return self.view_stack.pop()
 
     def _update_lr(self) -> float:
-        lr = self.tcfg["lr"]
-        v = expon_lr(self.step, lr["position_init"] * self.extent, lr["position_final"] * self.extent,
-                     int(lr["position_max_steps"]), int(setting(self.cfg, "train.lr.position_delay_steps") or 0),
-                     float(lr["position_delay_mult"]))
+        v = expon_lr(self.step, *self._position_lr)
         g = self.ps.group("means")
         if g is not None:
             g["lr"] = v
@@ -326,8 +328,8 @@ def make_trainer(config: dict, views: TrainViews, scene, field0: GaussianField, 
     dev = next(iter(views.images.values())).device if views.images else torch.device("cpu")
     return Trainer(config, views, float(scene.extent or 1.0), field0, run_dir, loss_fn, phase=phase,
                    iterations=iterations, trainable=trainable, densify=densify, backend=backend,
-                   seed=int(config["seed"]), extra_state=extra_state, device=dev, extra_optimizer=extra_optimizer,
-                   strategy=strategy)
+                   seed=int(setting(config, "seed")), extra_state=extra_state, device=dev,
+                   extra_optimizer=extra_optimizer, strategy=strategy)
 
 
 def load_checkpoint_if_any(run_dir: Path) -> Optional[dict]:

@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 from gsbench.camera import Camera, training_size
+from gsbench.config import setting
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
 from gsbench.resize import resize_rgb
@@ -29,11 +30,10 @@ def load_views(scene, config: dict, progress: bool = False,
     """Train cameras/images at the training resolution (images on `device`, copied once, or on the host
     with train.data_on=host), plus the
     first `eval_views` test views."""
-    tcfg = config["train"]
     train_ids, test_ids = split_ids(scene, config)
     if not train_ids:
         raise InputError(f"{scene.path}: the scene has no training views")
-    W, H = training_size(scene.cameras[train_ids[0]], tcfg.get("max_width"))
+    W, H = training_size(scene.cameras[train_ids[0]], setting(config, "train.max_width"))
 
     def load(i: int) -> tuple[Camera, torch.Tensor]:
         img = np.asarray(scene.image(i), dtype=np.float32)
@@ -47,7 +47,7 @@ def load_views(scene, config: dict, progress: bool = False,
     views = TrainViews({}, {})
     for i in train_ids:
         views.cameras[i], views.images[i] = load(i)
-    n_eval = int(tcfg.get("eval_views") or 0)
+    n_eval = int(setting(config, "train.eval_views"))
     test = list(test_ids)
     if n_eval > 0 and test:
         pick = [test[int(j)]

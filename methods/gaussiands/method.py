@@ -51,7 +51,6 @@ class GaussianDS(Method):
                      progress: bool = True) -> Phases:
         run_dir = Path(run_dir)
         dev = self._prepare(config)
-        g = config["gaussiands"]
         use = uses(config)
         # priors first: their working set (every image at the training size, flows) is freed before the
         # training images are loaded, so the peak is the larger of the two, not their sum
@@ -63,7 +62,7 @@ class GaussianDS(Method):
         self.info["priors_skipped"] = dict(pri.skipped)
 
         targets = None
-        d = int(config["semantic"]["latent_dim"]) if use["semantics"] else 0
+        d = int(setting(config, "semantic.latent_dim")) if use["semantics"] else 0
         if use["semantics"]:
             targets = self._semantic_targets(pri, config, d, resume, {v: (W, H) for v in train_ids}, dev)
         # ---- depth prior and its edges E_d (invariant to the per-iteration affine alignment, see losses.py)
@@ -71,8 +70,8 @@ class GaussianDS(Method):
         edges = {}
         if use["depth_prior"] and depth is None:
             raise ValueError(f"gaussiands: depth terms are on but the priors gave no depth ({pri.skipped})")
-        if g["losses"]["ds"] and depth is not None:
-            edges = self._depth_edges(depth, g["edges"], train_ids, dev, config)
+        if setting(config, "gaussiands.losses.ds") and depth is not None:
+            edges = self._depth_edges(depth, setting(config, "gaussiands.edges"), train_ids, dev, config)
         dprior = _device_depth_prior(depth, train_ids, dev, config)
         has_any = {v: bool(targets.has_target[v].any()) for v in train_ids} if targets is not None else {}
         # the host copies of the priors are no longer needed: the targets, dprior and edges hold what training
@@ -97,8 +96,8 @@ class GaussianDS(Method):
                              f"({pri.skipped})")
         ae_state = (resume or {}).get("extra", {}).get("autoencoder")
         self.autoencoder, self.info["autoencoder"], targets = semantic_targets(
-            pri.masks, pri.mask_features, config["semantic"]["autoencoder"], d, int(config["seed"]), ae_state,
-            sizes, dev, data_on(config))
+            pri.masks, pri.mask_features, setting(config, "semantic.autoencoder"), d, int(setting(config, "seed")),
+            ae_state, sizes, dev, data_on(config))
         return targets
 
     def _depth_edges(self, depth: dict, e: dict, train_ids: list[int], dev, config: dict) -> dict:
@@ -134,13 +133,13 @@ def gaussiands_loss(config: dict, dprior: dict, targets, has_any: dict[int, bool
                     edges: dict) -> LossFn:
     """The per-step loss L = L_rec + the switched-on weighted terms (module docstring), as the trainer calls
     it: StepContext (view id, render output, ground-truth image) -> LossResult."""
-    g = config["gaussiands"]
-    lam = g["lambdas"]
-    on = {**g["losses"], "sem": bool(config["semantic"]["loss"])}   # L_sem's switch is the shared one
-    lam_dssim = float(config["train"]["lambda_dssim"])
-    form = g["depth_formulation"]
-    min_valid = int(g["min_valid_pixels"])
-    tv_eps = float(g["tv_eps"])
+    # every setting read once here, not per step
+    lam = {k: setting(config, f"gaussiands.lambdas.{k}") for k in ("depth", "tv", "sem", "ds")}
+    on = {**setting(config, "gaussiands.losses"), "sem": bool(setting(config, "semantic.loss"))}   # L_sem: shared
+    lam_dssim = float(setting(config, "train.lambda_dssim"))
+    form = setting(config, "gaussiands.depth_formulation")
+    min_valid = int(setting(config, "gaussiands.min_valid_pixels"))
+    tv_eps = float(setting(config, "gaussiands.tv_eps"))
     ds_average = str(setting(config, "gaussiands.ds_average"))
 
     def loss_fn(ctx: StepContext) -> LossResult:

@@ -4,6 +4,7 @@ paper's numbers are paper.py beside it. It reads the shared `semantic` section (
 autoencoder) and its own `gaussiands` section below."""
 from __future__ import annotations
 
+from gsbench.config import setting
 from gsbench.config_keys import Rule, at_least, one_of, positive
 from gsbench.method_table import MethodSpec
 from gsbench.methods.rules import Drop, depth_source, resolve_semantics, switch_off
@@ -61,15 +62,15 @@ def resolve(cfg: dict, scene, drop: Drop) -> None:
 
 
 def uses(cfg: dict) -> dict:
-    g = cfg["gaussiands"]
-    on = g["losses"]
-    depth_terms = bool(on["depth"] and g["depth_formulation"] != "none") or bool(on["ds"])
-    return {"depth_prior": depth_terms, "semantics": bool(cfg["semantic"]["loss"] or on["ds"])}
+    ds = setting(cfg, "gaussiands.losses.ds")
+    depth = setting(cfg, "gaussiands.losses.depth") and setting(cfg, "gaussiands.depth_formulation") != "none"
+    depth_terms = bool(depth) or bool(ds)
+    return {"depth_prior": depth_terms, "semantics": bool(setting(cfg, "semantic.loss") or ds)}
 
 
 def budget(cfg: dict) -> dict:
     """Joint optimisation from scratch: every step is a semantic step when a semantic loss is on."""
-    steps = int(cfg["train"]["iterations"])
+    steps = int(setting(cfg, "train.iterations"))
     sem = uses(cfg)["semantics"]
     return {"rgb_steps": steps, "semantic_steps": steps if sem else 0, "schedule": "joint" if sem else "none"}
 

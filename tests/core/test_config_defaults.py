@@ -1,5 +1,5 @@
-"""Config defaults live in gsbench/configs/default.yaml and are read (gsbench.config.setting, or plain
-indexing of a resolved config), never restated at a call site: a `.get("<key>", <default.yaml's
+"""Config defaults live in gsbench/configs/default.yaml and the methods' specs and are read through
+gsbench.config.setting, never restated at a call site: a `.get("<key>", <default.yaml's
 value for that key>)` in the package is flagged. The listed sites take a section dict that callers
 and tests may give partially; the list may only shrink."""
 from __future__ import annotations
@@ -21,11 +21,10 @@ ALLOWED: set[tuple[str, str]] = {
     ("gsbench/priors/pipeline.py", "provider"), ("gsbench/priors/pipeline.py", "new_objects"),
     ("gsbench/priors/pipeline.py", "propagator"), ("gsbench/priors/pipeline.py", "ordering"),
     ("gsbench/priors/pipeline.py", "per_track"), ("gsbench/train/semantic_targets.py", "epochs"),
-    ("gsbench/train/semantic_targets.py", "lr"), ("gsbench/train/initial_field.py", "random_scale"),
+    ("gsbench/train/semantic_targets.py", "lr"),
     ("gsbench/train/semantic_targets.py", "hidden"), ("gsbench/priors/masks.py", "generator"),
-    # not config sections: a scene's gsbench_scene.json, a grid file's scene entry, a doctor report row
+    # not config sections: a scene's gsbench_scene.json, a grid file's scene entry
     ("datasets/loader.py", "generator"), ("gsbench/grids/grid_file.py", "seed"),
-    ("gsbench/commands/doctor.py", "backend"), ("gsbench/commands/doctor.py", "device"),
 }
 
 
