@@ -367,12 +367,14 @@ def test_no_two_packages_import_each_other():
     assert not found, "package import cycles:\n" + "\n".join(found)
 
 
-def test_the_ground_floor_loads_no_module_above_it():
-    """At run time too: importing the ground floor leaves every higher floor unloaded."""
+def test_the_ground_floor_loads_no_module_above_it(tmp_path):
+    """At run time too: importing the ground floor leaves every higher floor unloaded. The child runs in
+    an empty folder: from the checkout's parent, a clone named `gsbench` would be imported as a
+    namespace package."""
     ground = sorted(m for m in modules() if floor(m) == 0)
     code = ("import sys\n" + "".join(f"import {m}\n" for m in ground)
             + "print('\\n'.join(sorted(m for m in sys.modules if m.startswith('gsbench'))))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT.parent)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path)
     loaded = [m for m in out.stdout.split() if m in modules()]
     assert set(ground) <= set(loaded)
     assert [m for m in loaded if floor(m) > 0] == []
@@ -423,12 +425,12 @@ sys.exit(1 if failed else 0)
 
 @pytest.mark.slow
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
-def test_every_module_imports_first_in_a_fresh_process():
+def test_every_module_imports_first_in_a_fresh_process(tmp_path):
     """Each module imported first, alone (a forked child of a process holding no gsbench module): an
-    import cycle that the order of a test run hides fails here."""
+    import cycle that the order of a test run hides fails here. Run from an empty folder (see above)."""
     names = sorted(modules())
     out = subprocess.run([sys.executable, "-c", _IMPORT_EACH, ",".join(third_party_imports()), *names],
-                         capture_output=True, text=True, cwd=ROOT.parent)
+                         capture_output=True, text=True, cwd=tmp_path)
     assert out.returncode == 0, out.stdout + out.stderr
 
 
