@@ -39,12 +39,12 @@ def get_method(name: str) -> type:
 
 def uses(config: dict) -> dict:
     """What the (resolved) config feeds: {"depth_prior": bool, "semantics": bool}, as its method registered."""
-    return load_target(get_spec(setting(config, "method")).uses)(config)
+    return load_target(get_spec(config["method"]).uses)(config)
 
 
 def budget(config: dict) -> dict:
     """The training budget of a (resolved) config, by its method's rule: {"rgb_steps", "semantic_steps"}."""
-    return load_target(get_spec(setting(config, "method")).budget)(config)
+    return load_target(get_spec(config["method"]).budget)(config)
 
 
 # ---------------------------------------------------------------------------- per-scene resolution
@@ -55,7 +55,7 @@ def resolve_for_scene(config: dict, scene) -> tuple[dict, dict]:
     Resolving a resolved config again gives the same losses and priors.
     """
     cfg = copy.deepcopy(config)
-    spec = get_spec(setting(cfg, "method"))
+    spec = get_spec(cfg["method"])
     if spec.section is not None and not isinstance(cfg.get(spec.section), dict):
         raise InputError(f"method {spec.name}: the config has no {spec.section!r} section")
     dropped: dict[str, str] = {}
@@ -93,7 +93,7 @@ def build_priors_request(config: dict, scene) -> Optional[dict]:
     train_ids, _ = split_ids(scene, cfg)   # the views the method trains on (train.holdout)
     if not train_ids:
         return None
-    spec = get_spec(setting(cfg, "method"))
+    spec = get_spec(cfg["method"])
     use = load_target(spec.uses)(cfg)
     w, h = training_size(scene.cameras[train_ids[0]], setting(cfg, "train.max_width"))
     return {"scene_path": str(scene.path), "priors": setting(cfg, "priors"), "view_ids": sorted(train_ids),

@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from gsbench import rundir
-from gsbench.config import run_config, setting
+from gsbench.config import run_config
 from gsbench.datasets import load_scene
 from gsbench.errors import InputError
 from gsbench.methods.base import Method
@@ -29,8 +29,8 @@ def load_run(run_dir: str | Path):
         raise InputError(f"{run_dir}: run is not finished (status {st.get('state')!r}: {st.get('message', '')})")
     cfg = run_config(read_json(run_dir / rundir.CONFIG), run_dir / rundir.CONFIG)
     method = Method.load(run_dir / rundir.MODEL)
-    if method.name != setting(cfg, "method"):
-        raise InputError(f"{run_dir / rundir.CONFIG}: names method {setting(cfg, 'method')!r}, but the model in "
+    if method.name != cfg["method"]:
+        raise InputError(f"{run_dir / rundir.CONFIG}: names method {cfg['method']!r}, but the model in "
                          f"{rundir.MODEL} is {method.name!r} (the folder mixes two runs)")
     scene = load_scene(cfg["scene"]["path"])
     return method, cfg, scene

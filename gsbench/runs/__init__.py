@@ -101,7 +101,7 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
     write_json_atomic(run_dir / rundir.ENV, env_info())
     prev_s = float((st or {}).get("train_s_so_far") or 0.0)
     rundir.write_status(run_dir, "running", "", train_s_so_far=prev_s)
-    method = get_method(setting(cfg, "method"))()
+    method = get_method(cfg["method"])()
     t0 = time.perf_counter()
     memory = PeakMemory(_device(cfg)).start()
     try:
@@ -133,7 +133,7 @@ def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s:
     steps = [int(r["step"]) for r in log if "step" in r]
     last_eval = next((r["eval"] for r in reversed(log) if "eval" in r), None)
     n = method.field.num if getattr(method, "field", None) is not None else None
-    summary = {"run_id": cfg.get("run_id"), "method": setting(cfg, "method"), "status": state, "message": message,
+    summary = {"run_id": cfg.get("run_id"), "method": cfg["method"], "status": state, "message": message,
                "train_s": train_s, "peak_rss_mb": peaks["peak_rss_mb"], "rss_source": peaks["rss_source"],
                "iterations": max(steps) if steps else 0, "n_gaussians": n,
                "providers": method.provider_ids(), "dropped": cfg.get("dropped", {}), "backend": method.backend,
