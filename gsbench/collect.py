@@ -206,11 +206,12 @@ def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
 def upgraded_results(res: Any) -> Any:
     """A results.json written before a method moved keys, read in today's layout (its config and its grid
     axis keys: gsbench.config.upgrade_config), so old runs sit in the same columns as new ones."""
-    if not isinstance(res, dict) or upgrade_config(res.get("config")) is res.get("config"):
+    config = upgrade_config(res.get("config")) if isinstance(res, dict) else None
+    if config is None or config is res.get("config"):
         return res
     grid = res.get("grid")
     grid = {upgrade_key(str(k)): v for k, v in grid.items()} if isinstance(grid, dict) else grid
-    return {**res, "config": upgrade_config(res["config"]), "grid": grid}
+    return {**res, "config": config, "grid": grid}
 
 
 def _unreadable_row(path: Path, error: str) -> dict:

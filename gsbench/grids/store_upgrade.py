@@ -17,6 +17,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from gsbench.collect import upgraded_results
 from gsbench.config import canonical, upgrade_config, upgrade_key
 from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.environment import git_state
@@ -54,16 +55,15 @@ def _upgraded_record(c: Published, pc: PlannedCell, scenes: dict, sha: str) -> t
     scene, fp = scenes[sp]
     if fp != rec["scene_fingerprint"]:
         return None, f"its scene's fingerprint {rec['scene_fingerprint']} is not today's {fp} (a numerics change)"
-    config = upgrade_config(rec["config"])
-    planned = canonical(resolve_for_scene(pc.config, scene)[0])
-    if not _same(planned, canonical(config)):
-        return None, f"its config, upgraded, is not the plan's ({first_difference(planned, canonical(config))})"
+    results = upgraded_results({**rec["results"], "config": rec["config"]})   # its config and grid axis keys
+    config = results.pop("config")
+    planned, now = canonical(resolve_for_scene(pc.config, scene)[0]), canonical(config)
+    if not _same(planned, now):
+        return None, f"its config, upgraded, is not the plan's ({first_difference(planned, now)})"
     new = copy.deepcopy(rec)
     new["run_id"] = pc.run_id
     new["config"] = {**config, "run_id": pc.run_id}
-    new["results"]["run_id"] = pc.run_id
-    if isinstance(new["results"].get("grid"), dict):
-        new["results"]["grid"] = {upgrade_key(str(k)): v for k, v in new["results"]["grid"].items()}
+    new["results"] = {**copy.deepcopy(results), "run_id": pc.run_id}
     if new["train_summary"].get("run_id") is not None:
         new["train_summary"]["run_id"] = pc.run_id
     new["cell"]["axes"] = dict(pc.cell.axes)

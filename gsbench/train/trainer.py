@@ -129,7 +129,6 @@ class Trainer:
                  device: Optional[torch.device] = None,
                  extra_optimizer: Optional[Adam] = None, strategy: Optional[Strategy] = None) -> None:
         self.cfg = cfg
-        self.tcfg = setting(cfg, "train")
         self.views = views
         self.extent = float(extent) if extent and extent > 0 else 1.0
         self.run_dir = Path(run_dir)

@@ -93,7 +93,7 @@ def test_a_methods_own_strategy_replaces_densification(tmp_path):
 def test_the_default_strategy_is_3dgs_density_control_and_can_be_off(tmp_path):
     tr = _trainer(tmp_path, _rgb_loss)
     assert isinstance(tr.strategy, DefaultStrategy) and tr.strategy.enabled
-    assert tr.strategy.cfg is tr.tcfg["densify"]
+    assert tr.strategy.cfg is tr.cfg["train"]["densify"]
     off = _trainer(tmp_path, _rgb_loss, densify=False)
     assert not off.strategy.enabled
     n = off.ps.num
