@@ -23,6 +23,7 @@ from gsbench.reports.data import Results, is_null, same  # noqa: E402
 from gsbench.reports.display import (AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # noqa: E402  # isort: skip
                                   LOGICAL, NOISE_LABELS, NOISE_ORDER, method_label, metric_spec)
 from gsbench import rundir
+from gsbench.reports.run_names import run_labels  # noqa: E402
 from gsbench.reports.stats import pearson  # noqa: E402
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, _slug, runs_of, scene_protocols  # noqa: E402
 from gsbench.reports.sweeps import (
@@ -90,37 +91,6 @@ def train_curve(run_dir: str, metric_keys: list[str]) -> tuple[list[float], list
                 ys.append(float(v))
                 break
     return xs, ys
-
-
-def run_label(res: Results, rid: str) -> str:
-    """Short name of a run for legends: method, scene, the axis values it has, seed."""
-    r = res.runs.loc[rid]
-    parts = [method_label(r["method"]), str(r["scene"])]
-    for c in res.axis_columns:
-        v = r.get(c)
-        if not is_null(v) and c != "axis.method":
-            parts.append(f"{c.rsplit('.', 1)[-1]}={_fmt(v)}")
-    if not is_null(r.get("seed")):
-        parts.append(f"s{int(r['seed'])}")
-    return " ".join(parts)
-
-
-def run_labels(res: Results, run_ids: list[str]) -> dict[str, str]:
-    """run_label of each run; runs whose labels collide (they differ only outside the grid axes, e.g. by
-    preset or schedule) get their run folder's name, or their config key, appended."""
-    labels = {rid: run_label(res, rid) for rid in run_ids}
-    shared = {v for v in labels.values() if list(labels.values()).count(v) > 1}
-    for rid in [r for r in run_ids if labels[r] in shared]:
-        folder = Path(str(res.runs.at[rid, "run_dir"])).name
-        tag = folder if folder != rid else str(res.runs.at[rid, "config_key"])[:8]
-        labels[rid] = f"{labels[rid]} [{tag}]"
-    return labels
-
-
-def _fmt(v: Any) -> str:
-    if isinstance(v, float):
-        return f"{v:g}"
-    return str(v)
 
 
 def _final_time(res: Results, rid: str, curve_x: list[float]) -> float:

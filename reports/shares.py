@@ -18,7 +18,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from gsbench import rundir
 from gsbench.reports.data import Results, is_null  # noqa: E402
-from gsbench.reports.plots import _save, run_label  # noqa: E402
+from gsbench.reports.plots import _save  # noqa: E402
+from gsbench.reports.run_names import run_label  # noqa: E402
 from gsbench.store import read_jsonl  # noqa: E402
 
 MAX_PANELS = 12

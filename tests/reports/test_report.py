@@ -361,7 +361,7 @@ def test_unknown_study_gets_generic_table(tmp_path: Path):
 
 
 def test_runs_that_differ_only_by_preset_get_distinct_legend_labels(tmp_path: Path):
-    from gsbench.reports.plots import run_labels
+    from gsbench.reports.run_names import run_labels
     root = tmp_path / "runs"
     for name in ("vanilla_cpu-small", "vanilla_cpu-medium"):
         write_run(root, name, method="vanilla", scene="dtu", metrics={"psnr": 20.0})
