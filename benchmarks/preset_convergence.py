@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/preset_convergence.py --scene DIR [--presets cpu-small cpu-medium cpu-real]
                                                      [--method vanilla] [--factor 4] [--work DIR]
                                                      [--set KEY=VALUE ...] [--json out.json]
+                                                     [--plot out.png]
 
 For each preset it trains `--method` on the scene twice, each in its own `gsbench train` process, then
 evaluates with `gsbench eval`: once as the preset says, once with every step count of its schedule
@@ -12,7 +13,8 @@ intervals so that they happen as often per run). It prints one row per run: held
 the number of Gaussians, the training wall time (`train_s`, optimisation only) and the wall time of
 the whole `gsbench train` process, and for the long run the PSNR gap to the preset. "Converged"
 (docs/training.md, "Real captures") means a gap of at most 0.5 dB. Run it on an otherwise idle
-machine: the times are wall times.
+machine: the times are wall times. `--plot` draws held-out PSNR against training time, each preset
+joined to its long run, solid where the gap is within the rule and dashed where it is not.
 """
 from __future__ import annotations
 
@@ -26,6 +28,9 @@ from pathlib import Path
 from gsbench.config import load_config, setting
 
 #: the step counts of a schedule, scaled together by --factor
+#: the largest gap (dB) to the long run that counts as converged (docs/real-captures.md)
+CONVERGED_DB = 0.5
+
 SCHEDULE_KEYS = ("train.iterations", "train.lr.position_max_steps", "train.densify.from_iter",
                  "train.densify.until_iter", "train.densify.interval", "train.densify.opacity_reset_interval",
                  "train.sh_increase_every", "train.eval_every", "train.checkpoint_every", "train.log_every")
@@ -59,6 +64,38 @@ def train_and_eval(scene: Path, method: str, preset: str, sets: list[str], run: 
             "run": str(run)}
 
 
+def plot_rows(rows: list[dict], factor: int, title: str, path: Path) -> list[str]:
+    """Held-out PSNR against training time: each preset's run joined to its `factor`-times run (rows
+    in pairs, as main makes them); returns the legend labels, one per preset."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.0, 4.6))
+    labels = []
+    for i, (base, long) in enumerate(zip(rows[0::2], rows[1::2])):
+        gap = long["psnr"] - base["psnr"]
+        verdict = "converged" if gap <= CONVERGED_DB else "not converged"
+        label = f"{Path(base['preset']).stem}: {base['iterations']} steps, gap {gap:+.2f} dB ({verdict})"
+        ax.plot([base["train_s"], long["train_s"]], [base["psnr"], long["psnr"]],
+                "-" if gap <= CONVERGED_DB else "--", color=plt.cm.tab10(i % 10), lw=1.6, label=label)
+        ax.plot(base["train_s"], base["psnr"], "o", color=plt.cm.tab10(i % 10), ms=7, mec="black", mew=0.6)
+        ax.plot(long["train_s"], long["psnr"], "s", color=plt.cm.tab10(i % 10), ms=7, mec="black", mew=0.6)
+        labels.append(label)
+    ax.set_xscale("log")
+    ax.set_xlabel("training wall time (s, log scale)")
+    ax.set_ylabel("held-out PSNR (dB)")
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, loc="best",
+              title=f"o preset, \u25a1 {factor}x longer; solid: gap \u2264 {CONVERGED_DB} dB", title_fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return labels
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", required=True)
@@ -68,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--work", default="preset_convergence_runs", help="run folders (reused when finished)")
     ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="overrides for every run")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--plot", default=None, help="PNG: held-out PSNR against training time")
     args = ap.parse_args(argv)
     if args.factor < 2:
         raise SystemExit("preset_convergence: --factor must be at least 2")
@@ -91,6 +129,9 @@ def main(argv: list[str] | None = None) -> int:
         rows += [base, long]
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
+    if args.plot:
+        plot_rows(rows, args.factor, f"{scene.name}, {args.method}: each preset and the same {args.factor}x longer",
+                  Path(args.plot))
     return 0
 
 

@@ -55,6 +55,11 @@ CONTROLS: list[Control] = [
     Control("depth_noise", "few views, lambda_depth 1: noise on the depth prior lowers PSNR", "control_depth_noise",
             "psnr", -1, (AX_NOISE_TYPE, AX_NOISE_SEVERITY), {AX_NOISE_TYPE: None, AX_NOISE_SEVERITY: 0},
             ("noise_motion_blur", "noise_gaussian", "noise_poisson", "noise_salt_pepper")),
+    # does the noise reach the geometry at all? The same runs, the rendered-depth error; it guards nothing:
+    # the depth-noise claims are about PSNR, so only the PSNR control can un-blind them
+    Control("depth_noise_error", "few views, lambda_depth 1: noise on the depth prior raises the depth error "
+            "on covered pixels", "control_depth_noise", "depth_absrel_covered", +1, (AX_NOISE_TYPE, AX_NOISE_SEVERITY),
+            {AX_NOISE_TYPE: None, AX_NOISE_SEVERITY: 0}),
     Control("ds_mbiou", "capped Gaussians, edge-averaged L_ds raises mBIoU", "control_ds", "mbiou", +1,
             (AX_LOSSES[2],), {AX_LOSSES[2]: False}, ("loss_ds_miou", "loss_ds_mbiou"),
             DS_INPUTS),

@@ -103,6 +103,11 @@ def _noise_claim_runs(root: Path, drops: dict[str, list[float]]) -> None:
                       metrics={"psnr": 24.0 + SEED_NOISE[s] - drop[s]})
 
 
+def _psnr_noise_row(row) -> bool:
+    """A row of the depth-noise PSNR control (the same study also has the depth-error control)."""
+    return row.labels[1].startswith("control_depth_noise") and row.labels[0].endswith("lowers PSNR")
+
+
 def _verdicts(res: Results) -> dict[str, str]:
     t = claims_table(res)[0]
     texts = {c.text: c.key for c in PAPER_CLAIMS}
@@ -122,8 +127,7 @@ def test_a_row_that_fails_holm_leaves_the_control_unmarked_and_the_claims_blind(
     _noise_claim_runs(tmp_path, DROPS)
     res = Results(collect(tmp_path))
     t = controls_table(res)[0]
-    rows = {r.labels[3]: (r.cells[0].plain(), r.cells[1].plain()) for r in t.rows if r.labels[1].startswith(
-        "control_depth_noise")}
+    rows = {r.labels[3]: (r.cells[0].plain(), r.cells[1].plain()) for r in t.rows if _psnr_noise_row(r)}
     assert len(rows) == 12
     text, mark = rows["type=Motion blur, severity=5 vs type=–, severity=0"]
     assert "*" in text and mark == UNMARKED
@@ -143,7 +147,7 @@ def test_a_row_that_survives_holm_marks_the_control(tmp_path: Path):
     _noise_claim_runs(tmp_path, DROPS)
     res = Results(collect(tmp_path))
     t = controls_table(res)[0]
-    marks = {r.labels[3]: r.cells[1].plain() for r in t.rows if r.labels[1].startswith("control_depth_noise")}
+    marks = {r.labels[3]: r.cells[1].plain() for r in t.rows if _psnr_noise_row(r)}
     assert marks["type=Motion blur, severity=5 vs type=–, severity=0"] == MARKED
     assert _verdicts(res)["noise_gaussian"] == REPRODUCED
 
