@@ -12,7 +12,7 @@ interval, the opacity reset interval, the SH band interval, and the evaluation, 
 intervals so that they happen as often per run). It prints one row per run: held-out PSNR and SSIM,
 the number of Gaussians, the training wall time (`train_s`, optimisation only) and the wall time of
 the whole `gsbench train` process, and for the long run the PSNR gap to the preset. "Converged"
-(docs/training.md, "Real captures") means a gap of at most 0.5 dB. Run it on an otherwise idle
+(docs/real-captures.md) means a gap of at most 0.5 dB. Run it on an otherwise idle
 machine: the times are wall times. `--plot` draws held-out PSNR against training time, each preset
 joined to its long run, solid where the gap is within the rule and dashed where it is not.
 """
