@@ -27,10 +27,10 @@ from pathlib import Path
 
 from gsbench.config import load_config, setting
 
-#: the step counts of a schedule, scaled together by --factor
 #: the largest gap (dB) to the long run that counts as converged (docs/real-captures.md)
 CONVERGED_DB = 0.5
 
+#: the step counts of a schedule, scaled together by --factor
 SCHEDULE_KEYS = ("train.iterations", "train.lr.position_max_steps", "train.densify.from_iter",
                  "train.densify.until_iter", "train.densify.interval", "train.densify.opacity_reset_interval",
                  "train.sh_increase_every", "train.eval_every", "train.checkpoint_every", "train.log_every")
@@ -75,12 +75,13 @@ def plot_rows(rows: list[dict], factor: int, title: str, path: Path) -> list[str
     labels = []
     for i, (base, long) in enumerate(zip(rows[0::2], rows[1::2])):
         gap = long["psnr"] - base["psnr"]
-        verdict = "converged" if gap <= CONVERGED_DB else "not converged"
-        label = f"{Path(base['preset']).stem}: {base['iterations']} steps, gap {gap:+.2f} dB ({verdict})"
+        converged, color = gap <= CONVERGED_DB, plt.cm.tab10(i % 10)
+        label = (f"{Path(base['preset']).stem}: {base['iterations']} steps, gap {gap:+.2f} dB "
+                 f"({'converged' if converged else 'not converged'})")
         ax.plot([base["train_s"], long["train_s"]], [base["psnr"], long["psnr"]],
-                "-" if gap <= CONVERGED_DB else "--", color=plt.cm.tab10(i % 10), lw=1.6, label=label)
-        ax.plot(base["train_s"], base["psnr"], "o", color=plt.cm.tab10(i % 10), ms=7, mec="black", mew=0.6)
-        ax.plot(long["train_s"], long["psnr"], "s", color=plt.cm.tab10(i % 10), ms=7, mec="black", mew=0.6)
+                "-" if converged else "--", color=color, lw=1.6, label=label)
+        for run, marker in ((base, "o"), (long, "s")):
+            ax.plot(run["train_s"], run["psnr"], marker, color=color, ms=7, mec="black", mew=0.6)
         labels.append(label)
     ax.set_xscale("log")
     ax.set_xlabel("training wall time (s, log scale)")

@@ -60,10 +60,10 @@ def _upgraded_record(c: Published, pc: PlannedCell, scenes: dict, sha: str) -> t
     planned, now = canonical(resolve_for_scene(pc.config, scene)[0]), canonical(config)
     if not _same(planned, now):
         return None, f"its config, upgraded, is not the plan's ({first_difference(planned, now)})"
-    new = copy.deepcopy(rec)
+    new = copy.deepcopy({**rec, "results": results})
     new["run_id"] = pc.run_id
     new["config"] = {**config, "run_id": pc.run_id}
-    new["results"] = {**copy.deepcopy(results), "run_id": pc.run_id}
+    new["results"]["run_id"] = pc.run_id
     if new["train_summary"].get("run_id") is not None:
         new["train_summary"]["run_id"] = pc.run_id
     new["cell"]["axes"] = dict(pc.cell.axes)
