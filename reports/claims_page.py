@@ -23,7 +23,7 @@ from gsbench.grids.store import Published, Stale
 from gsbench.methods.gaussiands.paper import PAPER_CLAIMS
 from gsbench.numerics import NUMERICS_VERSION
 from gsbench.reports import doseplots
-from gsbench.reports.claims_table import NOT_RUN, claims_table
+from gsbench.reports.claims_table import CLAIM_COLUMNS, NOT_RUN, claims_table, not_run_row, paper_text
 from gsbench.reports.controls import CONTROLS, control_status, controls_table
 from gsbench.reports.data import Results
 from gsbench.reports.display import metric_spec
@@ -63,19 +63,11 @@ def strip_png_text(data: bytes) -> bytes:
 
 
 # ----------------------------------------------------------------------------- tables with no cell
-def _paper_text(c) -> str:
-    return ((f"{c.paper:+.{c.paper_decimals}f}" if c.paper is not None else "–")
-            + (f" ({c.paper_note})" if c.paper_note else ""))
-
-
 def empty_claims_table() -> Table:
     """The claims table before any claim study has a published cell: every row 'not run'."""
-    rows = [Row([c.text, c.source, "–"], [Cell(text=_paper_text(c)), Cell(text="study not run"), Cell(text="–"),
-                                           Cell(text=NOT_RUN)]) for c in PAPER_CLAIMS]
-    cols = [Column("paper", "Paper", "Paper"), Column("measured", "gsbench [95 % CI] (n)", "gsbench [95\\% CI] (n)"),
-            Column("mde", "MDE", "MDE"), Column("verdict", "Verdict", "Verdict")]
+    rows = [not_run_row(c, paper_text(c)) for c in PAPER_CLAIMS]
     return Table("paper_claims", "Paper claims", "No cell of a claim study is published: every claim is 'not run'.",
-                 ["Claim", "Paper source", "Scene"], cols, rows)
+                 ["Claim", "Paper source", "Scene"], CLAIM_COLUMNS, rows)
 
 
 def empty_controls_table() -> Table:
@@ -91,10 +83,21 @@ def empty_controls_table() -> Table:
 def verdict_counts(table: Table) -> dict[str, int]:
     """Rows per verdict (its words before any ':' detail), in first-seen order."""
     out: dict[str, int] = {}
+    at = [c.metric for c in table.columns].index("verdict")
     for r in table.rows:
-        v = (r.cells[-1].text or "").split(":", 1)[0].strip()
+        v = (r.cells[at].text or "").split(":", 1)[0].strip()
         out[v] = out.get(v, 0) + 1
     return out
+
+
+def seed_rule_line(table: Table) -> str:
+    """How many claim rows meet the seed rule (the 'Seeds for the MDE' column), and how many need more."""
+    at = [c.metric for c in table.columns].index("seeds")
+    texts = [r.cells[at].text or "" for r in table.rows]
+    met = sum(t.endswith("(met)") for t in texts)
+    short = sum(t.endswith("more)") or t.startswith(">") for t in texts)
+    return (f"Seed rule (an MDE of at most half the paper's effect; robustness: at most the margin): met by {met} "
+            f"rows, {short} need more seeds, {len(texts) - met - short} have no target or no interval yet.")
 
 
 # ----------------------------------------------------------------------------- the page
@@ -170,6 +173,7 @@ def build_page(current: list[Published], stale: list[Stale], grids: list[Grid], 
                       "`gsbench claims --out RUNS`, then `gsbench publish RUNS --to results/cpu` (docs/publishing.md)."]
     lines += ["", *_grid_lines(current, grids), "",
               "## Verdicts", "", f"Claims ({len(claims[0].rows)} rows): {verdicts}.", "",
+              seed_rule_line(claims[0]), "",
               f"Positive controls ({len(CONTROLS)}): {controls_line}.", ""]
     lines += [claims[0].to_markdown(), controls[0].to_markdown(), "## Dose response", ""]
     if figures:

@@ -34,7 +34,16 @@ from gsbench.reports.ablations import _covered, run_dropped
 from gsbench.reports.controls import blind_claims, starved
 from gsbench.reports.data import Results, same
 from gsbench.reports.display import metric_spec
-from gsbench.reports.stats import Diff, compare, family_note, mde_r, pearson, pearson_interval
+from gsbench.reports.stats import (
+    Diff,
+    compare,
+    family_note,
+    mde_r,
+    pearson,
+    pearson_interval,
+    runs_for_r,
+    seeds_for_mde,
+)
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
 from gsbench.reports.sweeps import lambda_points
 from gsbench.reports.table import Cell, Column, Row, Table
@@ -43,6 +52,24 @@ from gsbench.train.losses import EDGE_FLOOR
 REPRODUCED, OPPOSITE, INCONCLUSIVE, NOT_RUN, NOT_TESTABLE = (
     "reproduced", "opposite", "inconclusive", "not run", "not testable")
 SMALLER, NOT_REPRODUCED, BLIND = "smaller than claimed", "not reproduced", "blind"
+CLAIM_COLUMNS = [Column("paper", "Paper", "Paper"),
+                 Column("measured", "gsbench [95 % CI] (n)", "gsbench [95\\% CI] (n)"),
+                 Column("mde", "MDE", "MDE"), Column("verdict", "Verdict", "Verdict"),
+                 Column("seeds", "Seeds for the MDE", "Seeds for the MDE")]
+
+
+def paper_text(claim: Claim) -> str:
+    """The paper's number at its decimals, with its note."""
+    return ((f"{claim.paper:+.{claim.paper_decimals}f}" if claim.paper is not None else "–")
+            + (f" ({claim.paper_note})" if claim.paper_note else ""))
+
+
+def not_run_row(claim: Claim, paper: str) -> Row:
+    """The row of a claim whose study has no run."""
+    return Row([claim.text, claim.source, "–"], [Cell(text=paper), Cell(text="study not run"), Cell(text="–"),
+                                                 Cell(text=NOT_RUN), Cell(text="–")])
+
+
 def verdict(direction: int, lo: float | None, hi: float | None, paper: float | None = None,
             margin: float = ROBUST_MARGIN_DB, decimals: int | None = None) -> str:
     """The verdict of one claim from the interval [lo, hi] of (row - reference), or of r; with the
@@ -115,10 +142,42 @@ class Measured:
     mde: str = "–"
     no_effect: bool = False
     interval: bool = False  # the text prints a 95 % interval (counted in the caption's family)
+    seeds: str = "–"        # the seed rule: seeds (runs for r) the MDE needs to reach its target
 
 
 def _mde_text(mde: float | None, decimals: int, why: str) -> str:
     return f"{mde:.{decimals}f}" if mde is not None else f"n/a ({why})"
+
+
+def seed_target(claim: Claim) -> float | None:
+    """The MDE the seed rule asks of a claim, in display units: half the paper's effect (or of its r);
+    for a robustness claim, the margin (a drop of that size must be seen); None without either."""
+    if claim.direction == 0:
+        return ROBUST_MARGIN_DB
+    return abs(claim.paper) / 2.0 if claim.paper else None
+
+
+def _seeds_text(claim: Claim, d: Diff) -> str:
+    """'12 (9 more)' / '3 (met)': the paired seeds at which this row's observed spread gives an MDE of at
+    most `seed_target`, against the seeds it ran."""
+    target = seed_target(claim)
+    if target is None:
+        return "– (no target)"
+    if d.method != "paired" or d.se is None:
+        return "n/a (" + ("one seed" if d.method == "paired" else "unpaired") + ")"
+    m = seeds_for_mde(d.se, d.n_a, target)
+    if m is None:
+        return "> 1000"
+    return f"{m} (met)" if d.n_a >= m else f"{m} ({m - d.n_a} more)"
+
+
+def _runs_text(claim: Claim, n: int) -> str:
+    """The seed rule for a correlation: runs at which the smallest detectable |r| is half the paper's r."""
+    target = seed_target(claim)
+    if target is None or target >= 1.0:
+        return "– (no target)"
+    m = runs_for_r(target)
+    return f"{m} runs (met)" if n >= m else f"{m} runs ({m - n} more)"
 
 
 def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> Measured:
@@ -133,14 +192,15 @@ def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> Measured:
         r, why = pearson(xs, ys)
         if r is None:
             return Measured(f"n/a ({why})", NOT_RUN if len(xs) < 3 else INCONCLUSIVE, mde, len(xs) >= 3)
-        ci = pearson_interval(r, len(xs))
+        ci, runs = pearson_interval(r, len(xs)), _runs_text(claim, len(xs))
         if ci is None:
-            return Measured(f"r = {r:+.2f} [n/a: {len(xs)} runs, need 4] (n={len(xs)})", INCONCLUSIVE, mde, True)
+            return Measured(f"r = {r:+.2f} [n/a: {len(xs)} runs, need 4] (n={len(xs)})", INCONCLUSIVE, mde, True,
+                            seeds=runs)
         v = verdict(claim.direction, *ci, paper=claim.paper, decimals=claim.paper_decimals)
         excludes_zero = ci[0] > 0 or ci[1] < 0
         return Measured(f"r = {r:+.2f} [{ci[0]:+.2f}, {ci[1]:+.2f}]{' *' if excludes_zero else ''} (n={len(xs)})",
                         verdict_text(v, claim.direction, *ci, claim.paper, claim.paper_decimals), mde,
-                        not excludes_zero, True)
+                        not excludes_zero, True, runs)
     ids = res.run_ids(study=claim.study, scene=scene, protocol=protocol)
     a, b = _select(res, ids, claim.row), _select(res, ids, claim.reference)
     va, vb = res.seed_values(a, concrete, sp.scale), res.seed_values(b, concrete, sp.scale)
@@ -150,15 +210,15 @@ def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> Measured:
     why = _dropped_reason(res, a + b, list(claim.row) + list(claim.reference))
     d: Diff = compare(va, vb)
     text = d.text(sp.decimals)
-    mde = _mde_text(d.mde, sp.decimals, d.reason or "no spread")
+    mde, seeds = _mde_text(d.mde, sp.decimals, d.reason or "no spread"), _seeds_text(claim, d)
     if why:
-        return Measured(text + f"; setting dropped: {why}", NOT_TESTABLE, mde, interval=d.has_interval)
+        return Measured(text + f"; setting dropped: {why}", NOT_TESTABLE, mde, interval=d.has_interval, seeds=seeds)
     v = verdict(claim.direction, d.lo, d.hi, paper=claim.paper, decimals=claim.paper_decimals)
     why_blind = starved(res, a, claim.inputs)
     if why_blind and not d.significant:   # as for controls: an interval that excludes zero is never hidden
-        return Measured(text, f"{BLIND}: {why_blind}", mde, True, d.has_interval)
+        return Measured(text, f"{BLIND}: {why_blind}", mde, True, d.has_interval, seeds)
     return Measured(text, verdict_text(v, claim.direction, d.lo, d.hi, claim.paper, claim.paper_decimals), mde,
-                    not d.significant, d.has_interval)
+                    not d.significant, d.has_interval, seeds)
 
 
 def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]:
@@ -172,11 +232,9 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
     for c in claims:
         ids = res.run_ids(study=c.study)
         pairs = scene_protocols(res, ids) if ids else []
-        paper = ((f"{c.paper:+.{c.paper_decimals}f}" if c.paper is not None else "–")
-                 + (f" ({c.paper_note})" if c.paper_note else ""))
+        paper = paper_text(c)
         if not pairs:
-            rows.append(Row([c.text, c.source, "–"], [Cell(text=paper), Cell(text="study not run"), Cell(text="–"),
-                                                      Cell(text=NOT_RUN)]))
+            rows.append(not_run_row(c, paper))
             continue
         for sc, pr in pairs:
             m = measure(res, c, sc, pr)
@@ -187,9 +245,8 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
             if c.key in blind and m.no_effect:
                 m.verdict = blind[c.key]
             rows.append(Row([c.text, c.source, f"{sc} ({PROTOCOL_SHORT.get(pr, pr)})"],
-                            [Cell(text=paper), Cell(text=m.text), Cell(text=m.mde), Cell(text=m.verdict)]))
-    cols = [Column("paper", "Paper", "Paper"), Column("measured", "gsbench [95 % CI] (n)", "gsbench [95\\% CI] (n)"),
-            Column("mde", "MDE", "MDE"), Column("verdict", "Verdict", "Verdict")]
+                            [Cell(text=paper), Cell(text=m.text), Cell(text=m.mde), Cell(text=m.verdict),
+                             Cell(text=m.seeds)]))
     cap = ("Claims of the paper's ablation section against gsbench's measurements: effect = compared row minus "
            "reference row (display units; PSNR in dB, IoU in %), or Pearson r for the lambda claims, with its 95 % "
            "interval (t interval paired on the seeds both rows ran, a dropped seed is named; Welch when they share "
@@ -206,6 +263,9 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
            f"mechanism acts on (for L_ds: an edge map E_d marking under {100 * EDGE_FLOOR:g} % of the pixels); "
            "robustness claims use a "
            f"+-{ROBUST_MARGIN_DB} dB margin chosen by gsbench; not run = no runs. " + family_note(k)
-           + " One interval that excludes zero is weak evidence on its own.")
-    return [Table("paper_claims", "Paper claims", cap, ["Claim", "Paper source", "Scene"], cols, rows,
+           + " One interval that excludes zero is weak evidence on its own. Seeds for the MDE = the seed rule: how "
+           "many paired seeds this row's observed spread needs for an MDE of at most half the paper's effect (for a "
+           "robustness claim, at most the margin; for r, the runs at which the smallest detectable |r| is half the "
+           "paper's), 'met' when it ran that many.")
+    return [Table("paper_claims", "Paper claims", cap, ["Claim", "Paper source", "Scene"], CLAIM_COLUMNS, rows,
                   section="claims")]

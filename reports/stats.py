@@ -48,6 +48,7 @@ class Diff:
     p: float | None = None     # two-sided p-value of the t statistic the interval uses, None = no interval
     dropped: tuple[int, ...] = ()  # seeds left out: on one side only, or not finite on a side
     unseeded_dropped: int = 0      # runs without a seed left out of a paired comparison
+    se: float | None = None        # standard error of the difference, None = no spread
 
     @property
     def has_interval(self) -> bool:
@@ -163,6 +164,36 @@ def mde_r(n: int) -> float | None:
     return math.tanh(z / math.sqrt(n - 3))
 
 
+def seeds_for_mde(se: float, n: int, target: float, cap: int = 1000) -> int | None:
+    """Smallest number of paired seeds m >= 2 at which a paired design with the observed spread (sd of
+    the differences = se * sqrt(n), held fixed) has an MDE of at most `target`; None when more than
+    `cap` would be needed. The MDE falls as m grows (both the standard error and the noncentrality do),
+    and the noncentrality is never below z_0.975 + z_0.80, so the search starts at that bound."""
+    if not target > 0.0 or not math.isfinite(target):
+        raise ValueError(f"target MDE must be a positive number, got {target}")
+    if n < 2 or not math.isfinite(se) or se < 0.0:
+        raise ValueError(f"need a finite standard error from n >= 2 seeds, got se={se}, n={n}")
+    sd = se * math.sqrt(n)
+    floor = float(sps.norm.ppf(0.5 + LEVEL / 2.0)) + float(sps.norm.ppf(POWER))
+    start = max(2, math.floor((floor * sd / target) ** 2))
+    for m in range(start, cap + 1):
+        if mde_t(sd / math.sqrt(m), m - 1) <= target:
+            return m
+    return None
+
+
+def runs_for_r(target: float) -> int:
+    """Smallest number of runs n at which the smallest detectable |Pearson r| (`mde_r`) is at most
+    `target` (0 < target < 1)."""
+    if not 0.0 < target < 1.0:
+        raise ValueError(f"target |r| must lie in (0, 1), got {target}")
+    z = float(sps.norm.ppf(0.5 + LEVEL / 2.0)) + float(sps.norm.ppf(POWER))
+    n = 3 + math.ceil((z / math.atanh(target)) ** 2)
+    while n > 4 and mde_r(n - 1) <= target:  # ceil of a float: step back if one fewer already reaches it
+        n -= 1
+    return n
+
+
 def _mean_sd(x: np.ndarray) -> tuple[float, float]:
     """Mean and sample std (ddof=1) computed on x / max|x|, so values near the float64 limit do not
     overflow in the sum or the squares."""
@@ -193,6 +224,7 @@ def _interval(out: Diff, delta: float, se: float | None, df: float | None, t: fl
     if se is None:
         out.reason = "one seed"
         return out
+    out.se = se
     mde = mde_t(se, df)  # type: ignore[arg-type]
     out.mde = mde if math.isfinite(mde) else None
     out.lo, out.hi = delta - half, delta + half  # type: ignore[operator]

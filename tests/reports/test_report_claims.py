@@ -29,7 +29,7 @@ def rows_by_key(res: Results) -> dict[str, tuple[str, str]]:
 def full_rows(res: Results) -> dict[str, tuple[str, str, str]]:
     """claim key -> (measured text, MDE text, verdict text) of the first scene row."""
     t = claims_table(res)[0]
-    assert [c.metric for c in t.columns] == ["paper", "measured", "mde", "verdict"]
+    assert [c.metric for c in t.columns] == ["paper", "measured", "mde", "verdict", "seeds"]
     out: dict[str, tuple[str, str, str]] = {}
     texts = {c.text: c.key for c in PAPER_CLAIMS}
     for r in t.rows:
