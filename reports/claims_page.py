@@ -23,6 +23,7 @@ from gsbench.grids.store import Published, Stale
 from gsbench.methods.gaussiands.paper import PAPER_CLAIMS
 from gsbench.numerics import NUMERICS_VERSION
 from gsbench.reports import doseplots
+from gsbench.reports.claims_spread import spread_table
 from gsbench.reports.claims_table import CLAIM_COLUMNS, NOT_RUN, claims_table, not_run_row, paper_text
 from gsbench.reports.controls import CONTROLS, control_status, controls_table
 from gsbench.reports.data import Results
@@ -149,6 +150,7 @@ def build_page(current: list[Published], stale: list[Stale], grids: list[Grid], 
         res = _results(current, Path(tmp))
         claims = (claims_table(res) if res is not None else []) or [empty_claims_table()]
         controls = (controls_table(res) if res is not None else []) or [empty_controls_table()]
+        spread = spread_table(res) if res is not None else []
         figures = _figures(res, Path(tmp))
     planned = sum(len(g.cells()) for g in grids)
     counts = verdict_counts(claims[0])
@@ -175,7 +177,8 @@ def build_page(current: list[Published], stale: list[Stale], grids: list[Grid], 
               "## Verdicts", "", f"Claims ({len(claims[0].rows)} rows): {verdicts}.", "",
               seed_rule_line(claims[0]), "",
               f"Positive controls ({len(CONTROLS)}): {controls_line}.", ""]
-    lines += [claims[0].to_markdown(), controls[0].to_markdown(), "## Dose response", ""]
+    lines += [claims[0].to_markdown(), *[t.to_markdown() for t in spread], controls[0].to_markdown(),
+              "## Dose response", ""]
     if figures:
         lines += [f"![{name}]({figure_dir}/{name})\n" for name in figures]
     else:
