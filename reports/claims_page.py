@@ -24,7 +24,7 @@ from gsbench.methods.gaussiands.paper import PAPER_CLAIMS
 from gsbench.numerics import NUMERICS_VERSION
 from gsbench.reports import doseplots
 from gsbench.reports.claims_spread import spread_table
-from gsbench.reports.claims_table import CLAIM_COLUMNS, NOT_RUN, claims_table, not_run_row, paper_text
+from gsbench.reports.claims_table import CLAIM_COLUMNS, NOT_RUN, claims_table, not_run_row
 from gsbench.reports.controls import CONTROLS, control_status, controls_table
 from gsbench.reports.data import Results
 from gsbench.reports.display import metric_spec
@@ -66,7 +66,7 @@ def strip_png_text(data: bytes) -> bytes:
 # ----------------------------------------------------------------------------- tables with no cell
 def empty_claims_table() -> Table:
     """The claims table before any claim study has a published cell: every row 'not run'."""
-    rows = [not_run_row(c, paper_text(c)) for c in PAPER_CLAIMS]
+    rows = [not_run_row(c) for c in PAPER_CLAIMS]
     return Table("paper_claims", "Paper claims", "No cell of a claim study is published: every claim is 'not run'.",
                  ["Claim", "Paper source", "Scene"], CLAIM_COLUMNS, rows)
 
@@ -81,10 +81,15 @@ def empty_controls_table() -> Table:
                  "'not run'.", ["Control", "Study (metric)", "Scene", "Row"], cols, rows)
 
 
+def _column_at(table: Table, key: str) -> int:
+    """The index of the table's column `key` among a row's cells."""
+    return [c.metric for c in table.columns].index(key)
+
+
 def verdict_counts(table: Table) -> dict[str, int]:
     """Rows per verdict (its words before any ':' detail), in first-seen order."""
     out: dict[str, int] = {}
-    at = [c.metric for c in table.columns].index("verdict")
+    at = _column_at(table, "verdict")
     for r in table.rows:
         v = (r.cells[at].text or "").split(":", 1)[0].strip()
         out[v] = out.get(v, 0) + 1
@@ -93,7 +98,7 @@ def verdict_counts(table: Table) -> dict[str, int]:
 
 def seed_rule_line(table: Table) -> str:
     """How many claim rows meet the seed rule (the 'Seeds for the MDE' column), and how many need more."""
-    at = [c.metric for c in table.columns].index("seeds")
+    at = _column_at(table, "seeds")
     texts = [r.cells[at].text or "" for r in table.rows]
     met = sum(t.endswith("(met)") for t in texts)
     short = sum(t.endswith("more)") or t.startswith(">") for t in texts)

@@ -35,6 +35,7 @@ from gsbench.reports.controls import blind_claims, starved
 from gsbench.reports.data import Results, same
 from gsbench.reports.display import metric_spec
 from gsbench.reports.stats import (
+    SEEDS_CAP,
     Diff,
     compare,
     family_note,
@@ -64,10 +65,10 @@ def paper_text(claim: Claim) -> str:
             + (f" ({claim.paper_note})" if claim.paper_note else ""))
 
 
-def not_run_row(claim: Claim, paper: str) -> Row:
+def not_run_row(claim: Claim) -> Row:
     """The row of a claim whose study has no run."""
-    return Row([claim.text, claim.source, "–"], [Cell(text=paper), Cell(text="study not run"), Cell(text="–"),
-                                                 Cell(text=NOT_RUN), Cell(text="–")])
+    cells = [paper_text(claim), "study not run", "–", NOT_RUN, "–"]
+    return Row([claim.text, claim.source, "–"], [Cell(text=t) for t in cells])
 
 
 def verdict(direction: int, lo: float | None, hi: float | None, paper: float | None = None,
@@ -167,7 +168,7 @@ def _seeds_text(claim: Claim, d: Diff) -> str:
         return "n/a (" + ("one seed" if d.method == "paired" else "unpaired") + ")"
     m = seeds_for_mde(d.se, d.n_a, target)
     if m is None:
-        return "> 1000"
+        return f"> {SEEDS_CAP}"
     return f"{m} (met)" if d.n_a >= m else f"{m} ({m - d.n_a} more)"
 
 
@@ -232,10 +233,10 @@ def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]
     for c in claims:
         ids = res.run_ids(study=c.study)
         pairs = scene_protocols(res, ids) if ids else []
-        paper = paper_text(c)
         if not pairs:
-            rows.append(not_run_row(c, paper))
+            rows.append(not_run_row(c))
             continue
+        paper = paper_text(c)
         for sc, pr in pairs:
             m = measure(res, c, sc, pr)
             k += m.interval

@@ -31,6 +31,7 @@ from scipy.optimize import brentq
 LEVEL = 0.95
 ALPHA = 1.0 - LEVEL
 POWER = 0.80
+SEEDS_CAP = 1000  # the most seeds `seeds_for_mde` searches before it answers "more than this"
 _SHOWN_SEEDS = 8  # dropped seeds named in a cell before "+k more"
 
 
@@ -156,15 +157,19 @@ def family_note(k: int) -> str:
             f"0.05 · {k} = {ALPHA * k:.1f} of them exclude zero by chance.")
 
 
+def _z_power() -> float:
+    """z_0.975 + z_0.80: the normal-theory noncentrality of a two-sided 5 % test at 80 % power."""
+    return float(sps.norm.ppf(0.5 + LEVEL / 2.0)) + float(sps.norm.ppf(POWER))
+
+
 def mde_r(n: int) -> float | None:
     """Smallest |Pearson r| a two-sided 5 % test detects with 80 % power at n points (needs n > 3)."""
     if n <= 3:
         return None
-    z = float(sps.norm.ppf(0.5 + LEVEL / 2.0)) + float(sps.norm.ppf(POWER))
-    return math.tanh(z / math.sqrt(n - 3))
+    return math.tanh(_z_power() / math.sqrt(n - 3))
 
 
-def seeds_for_mde(se: float, n: int, target: float, cap: int = 1000) -> int | None:
+def seeds_for_mde(se: float, n: int, target: float, cap: int = SEEDS_CAP) -> int | None:
     """Smallest number of paired seeds m >= 2 at which a paired design with the observed spread (sd of
     the differences = se * sqrt(n), held fixed) has an MDE of at most `target`; None when more than
     `cap` would be needed. The MDE falls as m grows (both the standard error and the noncentrality do),
@@ -174,8 +179,7 @@ def seeds_for_mde(se: float, n: int, target: float, cap: int = 1000) -> int | No
     if n < 2 or not math.isfinite(se) or se < 0.0:
         raise ValueError(f"need a finite standard error from n >= 2 seeds, got se={se}, n={n}")
     sd = se * math.sqrt(n)
-    floor = float(sps.norm.ppf(0.5 + LEVEL / 2.0)) + float(sps.norm.ppf(POWER))
-    start = max(2, math.floor((floor * sd / target) ** 2))
+    start = max(2, math.floor((_z_power() * sd / target) ** 2))
     for m in range(start, cap + 1):
         if mde_t(sd / math.sqrt(m), m - 1) <= target:
             return m
@@ -187,8 +191,7 @@ def runs_for_r(target: float) -> int:
     `target` (0 < target < 1)."""
     if not 0.0 < target < 1.0:
         raise ValueError(f"target |r| must lie in (0, 1), got {target}")
-    z = float(sps.norm.ppf(0.5 + LEVEL / 2.0)) + float(sps.norm.ppf(POWER))
-    n = 3 + math.ceil((z / math.atanh(target)) ** 2)
+    n = 3 + math.ceil((_z_power() / math.atanh(target)) ** 2)
     while n > 4 and mde_r(n - 1) <= target:  # ceil of a float: step back if one fewer already reaches it
         n -= 1
     return n
