@@ -3,7 +3,7 @@
     gsbench publish RUNS --to results/cpu          add the finished cells of the claims plan in RUNS
     gsbench publish --status [results/cpu]         current / stale cells per grid
     gsbench publish --page docs/claims.md --from results/cpu --readme README.md [--check]
-    gsbench publish --upgrade [results/cpu]        rewrite cells of an older config layout (moved keys)
+    gsbench publish --upgrade [results/cpu]        rewrite cells of an older config layout or store format
 
 RUNS is a `gsbench claims --out` folder. A cell whose config is not the plan's, or that another
 numerics version computed, is refused; then nothing is written (docs/publishing.md).
@@ -15,6 +15,7 @@ from pathlib import Path
 
 from gsbench.errors import InputError
 from gsbench.grids.store import classify, format_store_status, plan_for, publish, read_store, repo_store
+from gsbench.grids.store_format import STORE_VERSION
 from gsbench.grids.store_upgrade import upgrade_store
 
 
@@ -26,8 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="list the store's current and stale cells (default: the repository's results/cpu)")
     parser.add_argument("--upgrade", nargs="?", const="", default=None, metavar="STORE",
                         help="rewrite the store's cells written before a method moved config keys, each under "
-                             "the run id today's plan gives it, when its upgraded config is the plan's "
-                             "(default: the repository's results/cpu)")
+                             "the run id today's plan gives it, when its upgraded config is the plan's, and "
+                             "cells of an older store format (default: the repository's results/cpu)")
     parser.add_argument("--page", type=Path, default=None, metavar="PAGE",
                         help="generate the claims page (figures in PAGE without .md/) from the store")
     parser.add_argument("--from", dest="source", type=Path, default=None, metavar="STORE",
@@ -90,7 +91,9 @@ def _upgrade(store: Path, grids: list) -> int:
         raise InputError(f"{store}: {len(rep.refused)} cells refused (listed above); nothing was rewritten")
     for grid, old, new in rep.upgraded:
         print(f"upgraded: {grid}/{old} -> {grid}/{new}")
-    print(f"{len(rep.upgraded)} cells upgraded, {rep.current} already in today's layout")
+    print(f"{len(rep.upgraded)} cells upgraded, {rep.current} already in today's layout"
+          + (f"; {len(rep.reformatted)} rewritten in store format {STORE_VERSION} (same content)"
+             if rep.reformatted else ""))
     return 0
 
 

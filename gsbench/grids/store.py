@@ -6,7 +6,8 @@ repository (results/cpu), so a run can be spread over sessions and every number 
 
 `config` is the run's resolved config.json (results.json's own copy of it is left out of `results`:
 it is the same object), `cell` the grid cell (method, seed, scene spec, axes), `provenance` the
-commit, machine, versions, date and wall times. No model file: a cell is a few tens of kB.
+commit, machine, versions, date and wall times. No model file: a cell is a few tens of kB, and the
+parts most cells share word for word are kept once under STORE/_shared (gsbench.grids.store_format).
 
 Why here (floor 3): publishing re-plans the grids (gsbench.grids.planning) and checks each run
 folder against its plan; `gsbench claims` materialises published cells back into run folders.
@@ -33,13 +34,21 @@ from gsbench.grids.claims_plan import CLAIM_GRIDS, CONTROL_GRIDS, plan_grids
 from gsbench.grids.grid_file import Grid, load_grid
 from gsbench.grids.liveness import cell_state
 from gsbench.grids.planning import PlannedCell, cell_config, plan
+from gsbench.grids.store_format import (
+    SHARED_DIR,
+    STORE_VERSION,
+    parts_used,
+    read_record,
+    record_text,
+    unused_parts,
+    write_record,
+)
 from gsbench.methods.registry import resolve_for_scene
 from gsbench.metric_table import TIMING_NAMES
 from gsbench.numerics import NUMERICS_VERSION
 from gsbench.runlock import RunLock
-from gsbench.store import read_json, write_json_atomic, write_text_atomic
+from gsbench.store import read_json, write_json_atomic
 
-STORE_VERSION = 1
 RECORD_KEYS = ("store_version", "numerics_version", "grid", "study", "run_id", "cell", "scene_fingerprint",
                "config", "results", "train_summary", "provenance")
 # evaluation's timing metrics differ from run to run: never compared, never a reason to refuse
@@ -68,29 +77,6 @@ def repo_store() -> Optional[Path]:
     """The repository's results/cpu when gsbench runs from a checkout that has one, else None."""
     p = Path(__file__).resolve().parents[2] / "results" / "cpu"
     return p if p.is_dir() else None
-
-
-# ----------------------------------------------------------------------------- the file format
-def record_text(obj: Any) -> str:
-    """A record as pretty JSON with sorted keys, lists of numbers on one line (small, readable diffs)."""
-    return _pretty(obj, 0) + "\n"
-
-
-def _pretty(obj: Any, level: int) -> str:
-    pad, end = "  " * (level + 1), "  " * level
-    if isinstance(obj, dict):
-        if not obj:
-            return "{}"
-        items = [f"{pad}{json.dumps(str(k), ensure_ascii=False)}: {_pretty(obj[k], level + 1)}"
-                 for k in sorted(obj, key=str)]
-        return "{\n" + ",\n".join(items) + "\n" + end + "}"
-    if isinstance(obj, (list, tuple)):
-        if any(isinstance(v, (dict, list, tuple)) for v in obj):
-            return "[\n" + ",\n".join(pad + _pretty(v, level + 1) for v in obj) + "\n" + end + "]"
-        return "[" + ", ".join(_pretty(v, level + 1) for v in obj) + "]"
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return "null"
-    return json.dumps(obj, ensure_ascii=False)
 
 
 def record_path(store: Path, grid: str, run_id: str) -> Path:
@@ -142,9 +128,9 @@ def read_store(store: Path) -> list[Published]:
         raise InputError(f"{store}: results store not found (a folder of <grid>/<run_id>.json files)")
     out = []
     for p in sorted(store.glob("*/*.json")):
-        if p.parent.name.startswith("."):
+        if p.parent.name.startswith(".") or p.parent.name == SHARED_DIR:
             continue
-        rec = read_json(p)
+        rec = read_record(p)
         _check_record(rec, p)
         out.append(Published(p, rec))
     return out
@@ -374,7 +360,7 @@ def publish(runs_dir: Path, store: Path, grids: list[Grid]) -> PublishReport:
     todo = []
     for rec in records:
         path = record_path(store, rec["grid"], rec["run_id"])
-        old = read_json(path) if path.exists() else None
+        old = read_record(path) if path.exists() else None
         if isinstance(old, dict) and old.get("numerics_version") == NUMERICS_VERSION:
             bad = [r.metric for r in compare_metrics((old.get("results") or {}).get("metrics") or {},
                                                      rec["results"].get("metrics") or {}) if not r.ok]
@@ -392,8 +378,20 @@ def publish(runs_dir: Path, store: Path, grids: list[Grid]) -> PublishReport:
         return report
     store.mkdir(parents=True, exist_ok=True)
     for path, rec in todo:
-        write_text_atomic(path, record_text(rec))
+        write_record(store, path, rec)
+    remove_unused_parts(store)
     return report
+
+
+def remove_unused_parts(store: Path) -> list[Path]:
+    """Delete the shared parts no cell of the store refers to any more (a replaced or upgraded cell's)."""
+    used: set[str] = set()
+    for c in read_store(store):
+        used |= parts_used(c.record)
+    gone = unused_parts(store, used)
+    for p in gone:
+        p.unlink()
+    return gone
 
 
 # ----------------------------------------------------------------------------- reuse by `gsbench claims`
@@ -431,7 +429,7 @@ def reuse_published(grid: Grid, runs_dir: Path, store: Path, log: Callable[[str]
         if pc.run_id is None or not record_path(store, grid.name, pc.run_id).exists():
             continue
         path = record_path(store, grid.name, pc.run_id)
-        rec = read_json(path)
+        rec = read_record(path)
         _check_record(rec, path)
         if rec["numerics_version"] != NUMERICS_VERSION:
             continue

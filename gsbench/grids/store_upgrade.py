@@ -7,6 +7,9 @@ cell under the run id today's plan gives it, and only when the cell's upgraded c
 plan's resolved config for the same cell (method, seed, scene, axes): then today's code computes what
 the record holds, which `gsbench verify` re-checks. The record keeps its provenance (the commit that
 computed it) and says where it came from (`provenance.upgraded`). All or nothing, like publish.
+
+The same command rewrites a cell written in an older store format (store_format.STORE_VERSION), under
+the same run id and with the same content: only the file layout changes.
 """
 from __future__ import annotations
 
@@ -23,15 +26,16 @@ from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.environment import git_state
 from gsbench.grids.grid_file import Grid
 from gsbench.grids.planning import PlannedCell, plan
-from gsbench.grids.store import Published, first_difference, read_store, record_path, record_text
+from gsbench.grids.store import Published, first_difference, read_store, record_path, remove_unused_parts
+from gsbench.grids.store_format import STORE_VERSION, record_text, write_record
 from gsbench.methods.registry import resolve_for_scene
-from gsbench.store import write_text_atomic
 
 
 @dataclass
 class UpgradeReport:
     upgraded: list[tuple[str, str, str]] = field(default_factory=list)   # (grid, old run id, new run id)
     current: int = 0                                                     # already in today's layout
+    reformatted: list[str] = field(default_factory=list)                 # cell files rewritten in today's format
     refused: list[tuple[str, str]] = field(default_factory=list)         # (cell file, why)
 
 
@@ -89,6 +93,8 @@ def upgrade_store(store: Path, grids: list[Grid]) -> UpgradeReport:
         for c in read_store(store):
             if upgrade_config(c.record["config"]) is c.record["config"]:
                 report.current += 1
+                if c.record.get("store_version") != STORE_VERSION:
+                    todo.append((c, c.record))
                 continue
             g = by_name.get(c.grid)
             if g is None:
@@ -109,10 +115,14 @@ def upgrade_store(store: Path, grids: list[Grid]) -> UpgradeReport:
     if report.refused:
         return report
     for c, new in todo:
-        write_text_atomic(record_path(store, new["grid"], new["run_id"]), record_text(new))
+        write_record(store, record_path(store, new["grid"], new["run_id"]), new)
+        if new is c.record:
+            report.reformatted.append(str(c.path))
+            continue
         if new["run_id"] != c.run_id:
             c.path.unlink()
         report.upgraded.append((c.grid, c.run_id, new["run_id"]))
+    remove_unused_parts(store)
     return report
 
 

@@ -18,6 +18,7 @@ from gsbench.cli import main
 from gsbench.collect import read_collected
 from gsbench.grids import store as store_mod
 from gsbench.grids.executors import SerialExecutor
+from gsbench.grids.store_format import SHARED_DIR, read_record
 from gsbench.numerics import NUMERICS_VERSION
 from gsbench.store import read_json
 
@@ -76,13 +77,14 @@ def test_publish_writes_one_sorted_json_per_cell(published, capsys):
     grid_file, runs, store = published
     files = sorted(store.rglob("*"))
     cells = _cells(runs)
-    assert sorted(p.name for p in files if p.is_file()) == sorted(f"{c.name}.json" for c in cells)
+    assert sorted(p.name for p in (store / "tiny").iterdir()) == sorted(f"{c.name}.json" for c in cells)
+    assert {p.parent.name for p in files if p.is_file()} == {"tiny", SHARED_DIR}
     assert all(p.suffix == ".json" for p in files if p.is_file())          # no model, no checkpoint
     for cell in cells:
         path = store / "tiny" / f"{cell.name}.json"
         text = path.read_text()
-        rec = json.loads(text)
-        assert _sorted_everywhere(rec) and text.startswith("{\n  \"cell\"")
+        assert _sorted_everywhere(json.loads(text)) and text.startswith("{\n  \"cell\"")
+        rec = read_record(path)
         assert len(text.encode()) < 64_000
         results = json.loads((cell / "results.json").read_text())
         assert rec["results"]["metrics"] == results["metrics"] and rec["config"] == results["config"]
@@ -194,7 +196,7 @@ def test_verify_exact_then_tampered(published, tmp_path, capsys):
     assert main(["verify", str(store), "--cells", "1", "--seed", "0"]) == 0
     out = capsys.readouterr().out
     assert "exact (same CPU family" in out and "0 mismatched" in out and "psnr" in out
-    for path in store.rglob("*.json"):
+    for path in (store / "tiny").glob("*.json"):
         rec = json.loads(path.read_text())
         rec["results"]["metrics"]["psnr"] += 1e-9
         path.write_text(json.dumps(rec))
@@ -207,8 +209,8 @@ def test_verify_exact_then_tampered(published, tmp_path, capsys):
 def _as_layout1(store: Path, fake_id: str) -> tuple[Path, str, dict]:
     """One published cell rewritten as gsbench wrote it before the `semantic` section (d, the autoencoder
     and L_sem's switch in `gaussiands`), under another run id: (its file, its true id, its record)."""
-    path = sorted(store.glob("*/*.json"))[0]
-    rec = read_json(path)
+    path = sorted(store.glob("tiny/*.json"))[0]
+    rec = read_record(path)
     true_id, sem = rec["run_id"], rec["config"].pop("semantic")
     g = rec["config"]["gaussiands"]
     g["latent_dim"], g["autoencoder"], g["losses"]["sem"] = sem["latent_dim"], sem["autoencoder"], sem["loss"]
@@ -223,13 +225,13 @@ def _as_layout1(store: Path, fake_id: str) -> tuple[Path, str, dict]:
 
 def test_upgrade_rewrites_a_layout1_cell_under_todays_run_id(published, capsys):
     grid_file, _, store = published
-    before = {p.name: read_json(p) for p in store.glob("*/*.json")}
+    before = {p.name: read_record(p) for p in store.glob("tiny/*.json")}
     old, true_id, _ = _as_layout1(store, "00000000000000aa")
     assert main(["publish", "--status", str(store), "--grids", str(grid_file)]) == 0
     assert "stale: " in capsys.readouterr().out                       # the old layout's id is no cell of the plan
     assert main(["publish", "--upgrade", str(store), "--grids", str(grid_file)]) == 0
     assert f"-> {old.parent.name}/{true_id}" in capsys.readouterr().out and not old.exists()
-    back = read_json(old.with_name(f"{true_id}.json"))
+    back = read_record(old.with_name(f"{true_id}.json"))
     assert back["provenance"].pop("upgraded")["from_run_id"] == "00000000000000aa"
     want = before[f"{true_id}.json"]
     assert back["results"] == want["results"] and back["run_id"] == true_id
@@ -244,8 +246,8 @@ def test_upgrade_refuses_a_cell_whose_config_is_not_the_plans(published, capsys)
     old, _, rec = _as_layout1(store, "00000000000000bb")
     rec["config"]["train"]["lr"]["color"] *= 2                        # not what the plan computes
     old.write_text(store_mod.record_text(rec))
-    files = sorted(p.name for p in store.glob("*/*.json"))
+    files = sorted(p.name for p in store.glob("tiny/*.json"))
     assert main(["publish", "--upgrade", str(store), "--grids", str(grid_file)]) == 1
     cap = capsys.readouterr()
     assert "is not the plan's (train.lr.color" in cap.out and "nothing was rewritten" in cap.err
-    assert sorted(p.name for p in store.glob("*/*.json")) == files    # nothing rewritten
+    assert sorted(p.name for p in store.glob("tiny/*.json")) == files    # nothing rewritten
