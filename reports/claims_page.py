@@ -141,10 +141,30 @@ def _figures(res: Results | None, work: Path) -> dict[str, bytes]:
     return dict(sorted(out.items()))
 
 
+def _seed_span(seeds: list[int]) -> str:
+    """[3, 4, 5, 9] -> '3–5, 9'."""
+    runs: list[list[int]] = []
+    for s in sorted(seeds):
+        if runs and s == runs[-1][-1] + 1:
+            runs[-1].append(s)
+        else:
+            runs.append([s])
+    return ", ".join(f"{r[0]}–{r[-1]}" if len(r) > 1 else str(r[0]) for r in runs)
+
+
 def _grid_lines(current: list[Published], grids: list[Grid]) -> list[str]:
-    lines = ["| Grid | Study | Published cells | Cells of the plan |", "|:--|:--|--:|--:|"]
+    """The per-grid status table, then the grids whose seeds were extended after a look at their results."""
+    lines = ["| Grid | Study | Seeds | Published cells | Cells of the plan |", "|:--|:--|--:|--:|--:|"]
     for g in grids:
-        lines.append(f"| {g.name} | {g.study} | {sum(c.grid == g.name for c in current)} | {len(g.cells())} |")
+        seeds = f"{len(g.seeds)}" + (" \\*" if g.later_seeds else "")
+        lines.append(f"| {g.name} | {g.study} | {seeds} | {sum(c.grid == g.name for c in current)} | "
+                     f"{len(g.cells())} |")
+    later = [g for g in grids if g.later_seeds]
+    if later:
+        lines += ["", "\\* Seeds added after a first look at the grid's results, so its verdicts had two looks at "
+                      "the data (docs/grids.md, \"Seeds\"):", ""]
+        lines += [f"- {g.name}, seed{'s' if len(g.later_seeds) > 1 else ''} {_seed_span(g.later_seeds)}: "
+                  f"{g.later_why}." for g in later]
     return lines
 
 

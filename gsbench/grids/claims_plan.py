@@ -46,6 +46,7 @@ def plan_grids(quick: bool = False, names: tuple[str, ...] | None = None) -> lis
             continue
         g = load_grid(name, extra_set=dict(QUICK_SET))
         g.seeds = [s for s in g.seeds if s in QUICK_SEEDS] or QUICK_SEEDS
+        g.later_seeds = [s for s in g.later_seeds if s in g.seeds]
         g.scenes = [_quick_scene(s) for s in g.scenes]
         out.append(g)
     return out

@@ -33,7 +33,7 @@ GRID_DIR = Path(__file__).parent
 # A grid of a paper study may vary only that study's axes; a control or smoke study (e.g. tiny-test)
 # is a name, not a contract, so its grids may vary anything.
 STUDIES: dict[str, tuple[str, ...]] = {name: st.axes for name, st in STUDY_TABLE.items() if st.kind == "paper"}
-TOP_KEYS = {"study", "description", "base", "scenes", "seeds", "mode", "axes", "sweeps", "extra_cells"}
+TOP_KEYS = {"study", "description", "base", "scenes", "seeds", "later_seeds", "mode", "axes", "sweeps", "extra_cells"}
 BASE_KEYS = {"method", "preset", "set"}
 
 
@@ -92,6 +92,8 @@ class Grid:
     extra_cells: list[dict[str, Any]]
     description: str = ""
     axis_keys: list[str] = field(default_factory=list)
+    later_seeds: list[int] = field(default_factory=list)   # seeds added after a first look at the results
+    later_why: str = ""                                     # what the look saw (the page says it)
 
     def base_tree(self) -> dict:
         """default.yaml <- preset <- base.set (used to spot cells that repeat the base config)."""
@@ -218,6 +220,27 @@ def _grid_preset(preset: Any, path: Optional[Path], where: str) -> Optional[str]
         raise InputError(f"{where}: base.preset: {e}") from None
 
 
+def _parse_seeds(raw: dict, where: str) -> tuple[list[int], list[int], str]:
+    """(seeds, the seeds added after a first look, why): `later_seeds: {seeds: [..], why: ".."}` declares
+    seeds a grid got after its results were seen, so the page can say which verdicts had two looks."""
+    seeds = _as_list(raw.get("seeds", [0]), f"{where}: seeds")
+    if not all(isinstance(s, int) and not isinstance(s, bool) for s in seeds):
+        raise InputError(f"{where}: seeds must be integers, got {short_repr(seeds)}")
+    later = raw.get("later_seeds")
+    if later is None:
+        return [int(s) for s in seeds], [], ""
+    if not isinstance(later, dict) or set(later) != {"seeds", "why"}:
+        raise InputError(f"{where}: later_seeds must be a mapping {{seeds: [...], why: '...'}}, "
+                         f"got {short_repr(later)}")
+    added, why = _as_list(later["seeds"], f"{where}: later_seeds.seeds"), later["why"]
+    if not added or any(s not in seeds for s in added) or len(added) == len(seeds):
+        raise InputError(f"{where}: later_seeds.seeds {short_repr(added)} must be some, not all, of seeds "
+                         f"{short_repr(seeds)}")
+    if not isinstance(why, str) or not why.strip():
+        raise InputError(f"{where}: later_seeds.why must say what the first look saw")
+    return [int(s) for s in seeds], [int(s) for s in added], why.strip()
+
+
 def parse_grid(raw: dict, where: str = "<grid>", path: Optional[Path] = None,
                extra_set: Optional[dict[str, Any]] = None) -> Grid:
     unknown = set(raw) - TOP_KEYS
@@ -244,10 +267,7 @@ def parse_grid(raw: dict, where: str = "<grid>", path: Optional[Path] = None,
     scenes = [
         _parse_scene(s, f"{where}: scenes[{i}]") for i, s in enumerate(_as_list(raw.get("scenes"), f"{where}: scenes"))
     ]
-    seeds = raw.get("seeds", [0])
-    seeds = _as_list(seeds, f"{where}: seeds")
-    if not all(isinstance(s, int) and not isinstance(s, bool) for s in seeds):
-        raise InputError(f"{where}: seeds must be integers, got {short_repr(seeds)}")
+    seeds, later, later_why = _parse_seeds(raw, where)
 
     blocks: list[tuple[str, dict[str, list]]] = []
     if raw.get("axes"):
@@ -295,7 +315,8 @@ def parse_grid(raw: dict, where: str = "<grid>", path: Optional[Path] = None,
                              "axis (use another study name for a custom grid)")
     name = path.stem if path is not None else study
     return Grid(name=name, study=study, path=path, method=method, preset=preset, base_set=base_set,
-                scenes=scenes, seeds=[int(s) for s in seeds], blocks=blocks, extra_cells=extra_cells,
-                description=str(raw.get("description", "")), axis_keys=axis_keys)
+                scenes=scenes, seeds=seeds, blocks=blocks, extra_cells=extra_cells,
+                description=str(raw.get("description", "")), axis_keys=axis_keys, later_seeds=later,
+                later_why=later_why)
 
 

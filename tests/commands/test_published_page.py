@@ -98,3 +98,16 @@ def test_the_same_store_gives_byte_identical_files(tmp_path):
     assert pngs and all(b"tEXt" not in png and b"tIME" not in png for png in pngs)
     text = pages[0][Path("claims.md")].decode()
     assert "4 of 0 cells" in text and "(claims/dose_latent_dim" in text and json.dumps(str(tmp_path))[1:-1] not in text
+
+
+def test_grids_with_later_seeds_are_marked_with_why():
+    from gsbench.grids.grid_file import parse_grid
+    base = {"study": "custom", "base": {"method": "gaussiands", "preset": "cpu-small"}, "scenes": ["tabletop-small"],
+            "axes": {"semantic.latent_dim": [3, 6]}}
+    later = parse_grid({**base, "seeds": [0, 1, 2, 3, 5], "later_seeds": {"seeds": [2, 3, 5], "why": "it read blind"}},
+                       path=Path("later.yaml"))
+    planned = parse_grid({**base, "seeds": [0, 1, 2]}, path=Path("planned.yaml"))
+    text = build_page([], [], [later, planned], "claims").text
+    assert "| later | custom | 5 \\* | 0 | 10 |" in text and "| planned | custom | 3 | 0 | 6 |" in text
+    assert "- later, seeds 2–3, 5: it read blind." in text and "- planned" not in text
+    assert "two looks at the data" in text

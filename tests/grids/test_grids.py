@@ -55,8 +55,8 @@ def test_study_cell_counts():
 
 def test_lambda_sweeps_union_without_duplicate_default():
     g = grids.load_grid("lambda_grid-cpu")
-    # 3x3 + 3x3 surfaces share the all-default cell (0.01, 5.0) == (1.5, 1.0): 17 distinct settings x 3 seeds
-    assert len(g.cells()) == 17 * 3
+    # 3x3 + 3x3 surfaces share the all-default cell (0.01, 5.0) == (1.5, 1.0): 17 distinct settings x 4 seeds
+    assert len(g.cells()) == 17 * len(g.seeds) and len(g.seeds) == 4
     assert g.axis_keys == ["gaussiands.lambdas.depth", "gaussiands.lambdas.sem", "gaussiands.lambdas.tv",
                            "gaussiands.lambdas.ds"]
 
@@ -97,6 +97,20 @@ def test_validation_errors():
         _grid(axes={"seed": [0, 1]})
     with pytest.raises(InputError, match="no such file and not a shipped grid"):
         grids.load_grid("no-such-grid")
+
+
+def test_later_seeds_are_declared_not_run_differently():
+    g = _grid(seeds=[0, 1, 2, 3], later_seeds={"seeds": [2, 3], "why": "the first two left it unmarked"},
+              axes={"semantic.latent_dim": [3, 6]})
+    plain = _grid(seeds=[0, 1, 2, 3], axes={"semantic.latent_dim": [3, 6]})
+    assert g.later_seeds == [2, 3] and g.later_why == "the first two left it unmarked" and plain.later_seeds == []
+    assert [(c.seed, c.overrides) for c in g.cells()] == [(c.seed, c.overrides) for c in plain.cells()]
+    for bad, match in (({"seeds": [4], "why": "x"}, "must be some, not all, of seeds"),
+                       ({"seeds": [0, 1, 2, 3], "why": "x"}, "must be some, not all, of seeds"),
+                       ({"seeds": [3], "why": " "}, "must say what the first look saw"),
+                       ({"seeds": [3]}, "must be a mapping")):
+        with pytest.raises(InputError, match=match):
+            _grid(seeds=[0, 1, 2, 3], later_seeds=bad)
 
 
 def test_set_cannot_override_an_axis():
