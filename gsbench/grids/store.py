@@ -35,12 +35,11 @@ from gsbench.grids.grid_file import Grid, load_grid
 from gsbench.grids.liveness import cell_state
 from gsbench.grids.planning import PlannedCell, cell_config, plan
 from gsbench.grids.store_format import (
-    SHARED_DIR,
     STORE_VERSION,
-    parts_used,
+    cell_files,
     read_record,
     record_text,
-    unused_parts,
+    remove_unused_parts,
     write_record,
 )
 from gsbench.methods.registry import resolve_for_scene
@@ -127,9 +126,7 @@ def read_store(store: Path) -> list[Published]:
     if not store.is_dir():
         raise InputError(f"{store}: results store not found (a folder of <grid>/<run_id>.json files)")
     out = []
-    for p in sorted(store.glob("*/*.json")):
-        if p.parent.name.startswith(".") or p.parent.name == SHARED_DIR:
-            continue
+    for p in cell_files(store):
         rec = read_record(p)
         _check_record(rec, p)
         out.append(Published(p, rec))
@@ -381,17 +378,6 @@ def publish(runs_dir: Path, store: Path, grids: list[Grid]) -> PublishReport:
         write_record(store, path, rec)
     remove_unused_parts(store)
     return report
-
-
-def remove_unused_parts(store: Path) -> list[Path]:
-    """Delete the shared parts no cell of the store refers to any more (a replaced or upgraded cell's)."""
-    used: set[str] = set()
-    for c in read_store(store):
-        used |= parts_used(c.record)
-    gone = unused_parts(store, used)
-    for p in gone:
-        p.unlink()
-    return gone
 
 
 # ----------------------------------------------------------------------------- reuse by `gsbench claims`

@@ -107,9 +107,10 @@ def unpack(rec: Any, path: Path) -> Any:
     store = Path(path).parent.parent
     out = dict(rec)
     for section, key in SHARED_PARTS:
-        value = (out.get(section) or {}).get(key) if isinstance(out.get(section), dict) else None
+        sec = out.get(section)
+        value = sec.get(key) if isinstance(sec, dict) else None
         if isinstance(value, dict) and set(value) == {SHARED_REF}:
-            out[section] = {**out[section], key: _shared_part(store, value[SHARED_REF], f"{section}.{key}", path)}
+            out[section] = {**sec, key: _shared_part(store, value[SHARED_REF], f"{section}.{key}", path)}
     return out
 
 
@@ -118,16 +119,37 @@ def read_record(path: Path) -> Any:
     return unpack(read_json(path), Path(path))
 
 
-def unused_parts(store: Path, used: set[str]) -> list[Path]:
-    """Shared parts no record refers to (left behind when cells were replaced)."""
+def cell_files(store: Path) -> list[Path]:
+    """The cell files of a store (STORE/<grid>/<run_id>.json), sorted; shared parts and hidden folders left out."""
+    return [p for p in sorted(Path(store).glob("*/*.json"))
+            if not p.parent.name.startswith(".") and p.parent.name != SHARED_DIR]
+
+
+def _refs(raw: Any) -> set[str]:
+    """The hashes of the shared parts a cell file, as stored, refers to."""
+    out = set()
+    for section, key in SHARED_PARTS:
+        sec = raw.get(section) if isinstance(raw, dict) else None
+        value = sec.get(key) if isinstance(sec, dict) else None
+        if isinstance(value, dict) and set(value) == {SHARED_REF}:
+            out.add(str(value[SHARED_REF]))
+    return out
+
+
+def remove_unused_parts(store: Path) -> list[Path]:
+    """Delete the shared parts no cell file refers to any more (a replaced or upgraded cell's); the
+    references are read from the files as stored, so nothing is unpacked or re-serialised."""
     folder = Path(store) / SHARED_DIR
-    return sorted(p for p in folder.glob("*.json") if p.stem not in used) if folder.is_dir() else []
-
-
-def parts_used(rec: dict) -> set[str]:
-    """The hashes of the shared parts `rec`, in today's format, refers to."""
-    return set(pack(rec)[1])
+    if not folder.is_dir():
+        return []
+    used: set[str] = set()
+    for p in cell_files(store):
+        used |= _refs(read_json(p))
+    gone = sorted(p for p in folder.glob("*.json") if p.stem not in used)
+    for p in gone:
+        p.unlink()
+    return gone
 
 
 __all__ = ["STORE_VERSION", "SHARED_DIR", "SHARED_PARTS", "record_text", "pack", "write_record", "read_record",
-           "unpack", "unused_parts", "parts_used"]
+           "unpack", "cell_files", "remove_unused_parts"]

@@ -26,8 +26,8 @@ from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.environment import git_state
 from gsbench.grids.grid_file import Grid
 from gsbench.grids.planning import PlannedCell, plan
-from gsbench.grids.store import Published, first_difference, read_store, record_path, remove_unused_parts
-from gsbench.grids.store_format import STORE_VERSION, record_text, write_record
+from gsbench.grids.store import Published, first_difference, read_store, record_path
+from gsbench.grids.store_format import STORE_VERSION, record_text, remove_unused_parts, write_record
 from gsbench.methods.registry import resolve_for_scene
 
 

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from gsbench.errors import InputError
-from gsbench.grids.store import read_store, remove_unused_parts
-from gsbench.grids.store_format import SHARED_DIR, read_record, record_text, write_record
+from gsbench.grids.store import read_store
+from gsbench.grids.store_format import SHARED_DIR, read_record, record_text, remove_unused_parts, write_record
 from gsbench.grids.store_upgrade import upgrade_store
 
 REPO_STORE = Path(__file__).resolve().parents[2] / "results" / "cpu"
