@@ -2,9 +2,9 @@
 
 The first thing to run on a downloaded dataset (`gsbench data check PATH`). It goes through the
 loader's own readers (layout detection, the camera readers, the 3D-OVS and LERF-OVS label readers,
-the synthetic-scene reader) part by part and reads every label file eagerly, where a run reads them
-lazily. A problem is recorded as one line naming the file, and the check goes on with the next
-file or part, so one run lists every bad file instead of the first.
+the synthetic-scene reader) part by part, decodes every image whole and reads every label file
+eagerly, where a run reads them lazily. A problem is recorded as one line naming the file, and the
+check goes on with the next file or part, so one run lists every bad file instead of the first.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from gsbench.errors import InputError
 
 from . import ovs
 from .guard import CameraProblems
-from .imageio import image_size, list_images, read_gray
+from .imageio import image_size, list_images, read_gray, read_rgb
 from .loader import LAYOUTS, SYNTHETIC_META, _attach_synthetic, _base_scene, detect_layout, load_scene
 
 
@@ -53,6 +53,20 @@ def _sizes_text(sizes) -> str:
     return ", ".join(sorted({f"{w}x{h}" for w, h in sizes})) or "-"
 
 
+def _decode_all(paths: list, sizes: list, rep: FolderReport) -> None:
+    """Decode every image whole, as training does (a truncated PNG or JPEG passes a header check
+    and fails here), each at the size its camera says (`sizes[i]` None: no size check)."""
+    ok = 0
+    for p, size in zip(paths, sizes):
+        try:
+            read_rgb(Path(p), size)
+            ok += 1
+        except InputError as e:
+            if str(e) not in rep.problems:     # an image the header check named already
+                rep.problems.append(str(e))
+    rep.facts.append(f"decoded   {ok} of {len(paths)} images whole")
+
+
 def _views(root: Path, layout: str, rep: FolderReport):
     """(scene or None, image names, image sizes): the cameras, else the bare image list."""
     try:
@@ -75,6 +89,7 @@ def _views(root: Path, layout: str, rep: FolderReport):
         rep.facts.append(f"points    {pts}")
         rep.facts.append(f"split     {len(scene.train_ids)} train / {len(scene.test_ids)} test "
                          f"({m.get('split', '?')})")
+        _decode_all(scene.image_paths, sizes, rep)
         return scene, names, sizes
     try:
         paths = list_images(root / "images")
@@ -91,6 +106,7 @@ def _views(root: Path, layout: str, rep: FolderReport):
             sizes.append(None)
     rep.facts.append(f"views     {len(names)} images, {_sizes_text(x for x in sizes if x)}")
     rep.facts.append("poses     none usable (see the problems)")
+    _decode_all([p for p, size in zip(paths, sizes) if size], [size for size in sizes if size], rep)
     return None, names, sizes
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from gsbench.camera import ROTATION_TOL, Camera, quaternion_matrix
-from gsbench.errors import InputError
+from gsbench.errors import InputError, shorten
 
 from .guard import RawCamera, build_cameras
 
@@ -55,6 +55,18 @@ def _world_to_camera(im) -> np.ndarray:
     return w2c
 
 
+def _refuse_duplicate_names(rec, images_file: Path) -> None:
+    """Two images of one name: the cameras are keyed by image name, so one pose would be dropped
+    without a word (and which one would depend on the order of the ids)."""
+    seen: dict[str, int] = {}
+    for image_id, im in sorted(rec.images.items()):
+        if im.name in seen:
+            raise InputError(f"{images_file}: images {seen[im.name]} and {image_id} are both named "
+                             f"{shorten(repr(im.name))}: each image needs its own name (its pose is looked up "
+                             "by name); remove or rename one")
+        seen[im.name] = image_id
+
+
 def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, np.ndarray | None, dict]:
     """Cameras by image name, sparse points (M x 3), point colours (M x 3 in [0, 1]), meta."""
     import pycolmap
@@ -65,6 +77,7 @@ def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, 
     except Exception as e:
         raise InputError(f"{model_dir}: cannot read COLMAP model ({type(e).__name__}: {e})") from None
     cams_file, images_file = (model_file(model_dir, stem) for stem in ("cameras", "images"))
+    _refuse_duplicate_names(rec, images_file)
     raws: list[RawCamera] = []
     distorted = []
     for im in sorted(rec.images.values(), key=lambda im: im.name):

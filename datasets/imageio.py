@@ -1,6 +1,9 @@
 """Image files: reading as float RGB in [0, 1], header-only size checks, atomic PNG / NPY writes.
 
 Every reader goes through these so that a missing or unreadable file is one InputError naming it.
+Every reader applies a file's EXIF orientation, the size from the header and the decoded pixels alike
+(a phone's JPEG stored sideways is read upright, as a viewer shows it), so a camera whose size comes
+from the header fits the pixels training reads.
 """
 from __future__ import annotations
 
@@ -19,6 +22,7 @@ from gsbench.store import write_bytes_atomic
 # under 10), checked from the header so that a small file claiming a huge size is never decoded.
 MAX_IMAGE_PIXELS = 100_000_000
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+EXIF_ORIENTATION = 0x0112     # the EXIF tag of how the stored pixels are turned for display
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".JPG", ".JPEG", ".PNG", ".bmp", ".tif", ".tiff", ".exr", ".webp")
 
 
@@ -33,23 +37,55 @@ def list_images(folder: Path) -> list[Path]:
     return files
 
 
+def orientation(path: Path) -> int:
+    """The EXIF orientation of an image file (1..8: how the stored pixels are turned for display), 1
+    when it has none or one outside 1..8, or when PIL cannot read the header (the decoder judges
+    the file then). A PNG's eXIf chunk counts when it comes before the pixel data (PIL's lazy open
+    reads that far and no further)."""
+    from PIL import Image
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as im:
+                if im.format == "PNG" and "exif" not in im.info:
+                    return 1
+                value = im.getexif().get(EXIF_ORIENTATION, 1)
+    except Exception:  # PIL raises several types for unreadable files
+        return 1
+    return value if isinstance(value, int) and 1 <= value <= 8 else 1
+
+
+def apply_orientation(img: np.ndarray, value: int) -> np.ndarray:
+    """The decoded pixels turned as EXIF orientation `value` says (what PIL's ImageOps.exif_transpose
+    does): 2 mirrored, 3 turned half round, 4 flipped, 5 transposed, 6 turned a quarter clockwise,
+    7 transversed, 8 a quarter counter-clockwise; 5 to 8 swap width and height."""
+    turns = {2: lambda a: a[:, ::-1], 3: lambda a: a[::-1, ::-1], 4: lambda a: a[::-1],
+             5: lambda a: np.swapaxes(a, 0, 1), 6: lambda a: np.rot90(a, -1),
+             7: lambda a: np.swapaxes(a[::-1, ::-1], 0, 1), 8: lambda a: np.rot90(a, 1)}
+    return np.ascontiguousarray(turns[value](img)) if value in turns else img
+
+
 def _header_size(path: Path) -> tuple[int, int]:
-    """(width, height) from the header: a PNG's IHDR read directly, other formats through PIL's lazy
-    open (its decompression-bomb warning silenced: the budget below decides)."""
+    """(width, height) from the header, as displayed (an EXIF orientation of 5 to 8 swaps them): a
+    PNG's IHDR read directly, other formats through PIL's lazy open (its decompression-bomb warning
+    silenced: the budget below decides)."""
     from PIL import Image
 
     with open(path, "rb") as fh:
         head = fh.read(24)
     if head[:8] == PNG_SIGNATURE and head[12:16] == b"IHDR":
-        return struct.unpack(">II", head[16:24])
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            with Image.open(path) as im:
-                return int(im.size[0]), int(im.size[1])
-    except Image.DecompressionBombError:     # over PIL's own limit, which lies above the budget
-        raise InputError(f"{path}: refused: more than {MAX_IMAGE_PIXELS} pixels, the most gsbench "
-                         "decodes in one image") from None
+        w, h = struct.unpack(">II", head[16:24])
+    else:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+                with Image.open(path) as im:
+                    w, h = int(im.size[0]), int(im.size[1])
+        except Image.DecompressionBombError:     # over PIL's own limit, which lies above the budget
+            raise InputError(f"{path}: refused: more than {MAX_IMAGE_PIXELS} pixels, the most gsbench "
+                             "decodes in one image") from None
+    return (h, w) if orientation(path) >= 5 else (w, h)
 
 
 def image_size(path: Path) -> tuple[int, int]:
@@ -88,7 +124,7 @@ def _decode(path: Path, flags: int) -> np.ndarray:
     img = cv2.imdecode(data, flags) if data.size else None
     if img is None:
         raise InputError(f"{path}: cannot decode image (corrupt or unsupported format)")
-    return img
+    return apply_orientation(img, orientation(path))     # IMREAD_UNCHANGED leaves EXIF orientation out
 
 
 def _to_unit(img: np.ndarray, path: Path) -> np.ndarray:

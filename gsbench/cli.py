@@ -17,7 +17,7 @@ import sys
 from typing import Optional, Sequence
 
 from gsbench import startup
-from gsbench.errors import InputError, NonFiniteError, interrupted
+from gsbench.errors import InputError, NonFiniteError, Terminated, bounded_line, interrupted
 
 COMMANDS = {
     "make-scene": ("make_scene", "generate a synthetic scene (analytic ray caster) in 3D-OVS / LERF-OVS layouts"),
@@ -39,10 +39,17 @@ LOG_FORMAT = "gsbench: %(message)s"
 DEBUG_LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, its usage errors bounded too (an invalid choice echoes the value given)."""
+
+    def error(self, message: str):  # type: ignore[override]
+        super().error(bounded_line(message))
+
+
 def _global_flags(suppress: bool) -> argparse.ArgumentParser:
     """--debug / --quiet / --verbose, accepted before or after the sub-command."""
     d = {"default": argparse.SUPPRESS} if suppress else {}
-    p = argparse.ArgumentParser(add_help=False)
+    p = _Parser(add_help=False)
     p.add_argument("--debug", action="store_true", help="show the traceback of errors (or set GSBENCH_DEBUG=1)", **d)
     g = p.add_mutually_exclusive_group()
     g.add_argument("-q", "--quiet", action="store_true", help="warnings and errors only, no progress bars", **d)
@@ -51,7 +58,7 @@ def _global_flags(suppress: bool) -> argparse.ArgumentParser:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="gsbench",
         description="Benchmark harness for semantic 3D Gaussian Splatting.",
         parents=[_global_flags(suppress=False)],
@@ -98,7 +105,8 @@ def debug_requested(args: argparse.Namespace) -> bool:
 
 
 def one_line(e: BaseException) -> str:
-    """The error as one line: OS errors as 'path: problem', multi-line messages (YAML parsers) joined."""
+    """The error as one line: OS errors as 'path: problem', multi-line messages (YAML parsers) joined,
+    every long name, path or value in it shortened (gsbench.errors.bounded_line)."""
     if isinstance(e, OSError) and e.filename is not None and e.strerror:
         msg = f"{e.filename}: {e.strerror}"
         if e.errno in (errno.EEXIST, errno.ENOTDIR):
@@ -107,7 +115,7 @@ def one_line(e: BaseException) -> str:
             msg += " (not writable/readable by this user)"
     else:
         msg = str(e)
-    return " | ".join(line.strip() for line in msg.splitlines() if line.strip()) or type(e).__name__
+    return bounded_line(msg) or type(e).__name__
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -127,6 +135,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except (KeyboardInterrupt, SystemError) as e:
         if debug_requested(args) or not interrupted(e):   # a SystemError that is not Ctrl-C is a bug
             raise
+        if isinstance(e, Terminated):
+            print(f"gsbench {args.command}: terminated (SIGTERM); finished work is saved, re-run to resume",
+                  file=sys.stderr)
+            return 143
         print(f"gsbench {args.command}: interrupted; finished work is saved, re-run to resume", file=sys.stderr)
         return 130
 

@@ -25,16 +25,17 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 import pandas as pd
 
 from gsbench import rundir
 from gsbench.config import config_key, upgrade_config, upgrade_key
-from gsbench.errors import InputError
+from gsbench.errors import InputError, shorten
 from gsbench.metric_table import KNOWN_METRICS
-from gsbench.results import check_shape
+from gsbench.results import RESULTS_VERSION, check_shape
 from gsbench.store import read_json, write_bytes_atomic, write_text_atomic
 
 BASE_COLUMNS = [
@@ -62,13 +63,38 @@ def find_results(runs_dir: Path) -> list[Path]:
     return out
 
 
+def number_problem(value: Any) -> Optional[str]:
+    """Why `value`, read from a JSON file, is not a number a reader may compute with (a finite int or
+    float within float range, or null), in a few words that never echo a long value; None when it is."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return f"a {type(value).__name__} ({shorten(repr(value), 40)})"
+    if isinstance(value, int) and abs(value) > sys.float_info.max:     # compared exactly: no overflow
+        return f"an integer of {len(str(abs(value)))} digits, beyond the float range"
+    if isinstance(value, float) and not math.isfinite(value):
+        return f"{value} (not finite)"
+    return None
+
+
 def _as_float(value: Any, path: Path, what: str) -> float:
+    """A stored number as a float (null: NaN); anything else an InputError naming the file and key."""
+    why = number_problem(value)
+    if why is not None and not (isinstance(value, float) and not math.isfinite(value)):
+        raise InputError(f"{shorten(path)}: {shorten(what, 80)} must be a number or null, got {why}")
     if value is None:
         return math.nan
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"{path}: {what} must be a number or null, got {value!r}")
     v = float(value)
     return v if math.isfinite(v) else math.nan
+
+
+def check_results_version(res: Any, path: Path) -> None:
+    """A results.json of a newer results version than this gsbench reads is refused, naming the file."""
+    version = res.get("results_version") if isinstance(res, dict) else None
+    if version is not None and (isinstance(version, bool) or not isinstance(version, int)
+                                or not 1 <= version <= RESULTS_VERSION):
+        raise InputError(f"{shorten(path)}: results version {shorten(repr(version), 40)}; this gsbench reads "
+                         f"versions 1 to {RESULTS_VERSION} (a newer gsbench wrote it?)")
 
 
 def _scalar(value: Any) -> Any:
@@ -125,6 +151,7 @@ def _read_env(path: Path) -> dict:
 
 def _rows_for(path: Path, res: Any, known_metrics: set[str]) -> list[dict]:
     check_shape(res, path)
+    check_results_version(res, path)
     metrics = res.get("metrics") or {}
     skipped = res.get("skipped") or {}
     grid = res.get("grid") or {}

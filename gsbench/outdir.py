@@ -18,6 +18,12 @@ overwrites a file it did not write.
   is deleted.
 - One writer at a time: a lock file beside OUT (`.OUT.writer.lock`, gsbench.runlock); a second
   command into OUT fails at once with one line naming the holder.
+- OUT is never the file system's root, and a path whose symbolic links loop is one line.
+
+A run folder (`gsbench train --out RUN`) is written file by file, so it has no manifest: it is a run's
+when it holds a run's config.json, and then only the run's own names (gsbench.rundir) and what a
+killed writer leaves; without one, nothing but the lock (`check_run_folder`). It is never the root,
+the scene folder, gsbench's project tree or the published results store.
 """
 from __future__ import annotations
 
@@ -35,9 +41,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Optional
 
-from gsbench.errors import InputError
+from gsbench import rundir
+from gsbench.errors import InputError, shorten
 from gsbench.runlock import RunLock
-from gsbench.store import read_json, write_json_atomic
+from gsbench.store import new_folder_mode, read_json, write_json_atomic
 
 log = logging.getLogger(__name__)
 
@@ -224,9 +231,25 @@ def _clashes(staging: Path, rel: str) -> bool:
     return any(os.path.lexists(q) and not q.is_dir() for q in p.parents if staging in q.parents)
 
 
+def resolved(out: str | os.PathLike) -> Path:
+    """OUT as an absolute path with every link followed; a symbolic link loop (or a link chain too
+    long to follow) is one InputError naming OUT, not the RuntimeError pathlib raises."""
+    try:
+        return Path(os.path.abspath(out)).resolve()
+    except (RuntimeError, OSError) as e:
+        why = e.strerror if isinstance(e, OSError) and e.strerror else "a loop of symbolic links"
+        raise InputError(f"{shorten(out)}: cannot be used as a folder: {why} (a symbolic link in it "
+                         "points back to itself); give another path") from None
+
+
 def _check_target(out: Path) -> None:
     """OUT is a folder or can be one: a file there, or where a parent folder should be, is refused
-    (the latter with the error every writer gives, ENOTDIR)."""
+    (the latter with the error every writer gives, ENOTDIR); so are a path whose links loop and the
+    file system's root (it has no parent to hold the lock and the staging folder beside it)."""
+    real = resolved(out)
+    if real.parent == real:
+        raise InputError(f"{out}: refused: the root of the file system is not an output folder; "
+                         "give a folder of its own")
     for parent in out.parents:
         if parent.exists():
             if not parent.is_dir():
@@ -260,7 +283,7 @@ class OwnedFolder:
     def __init__(self, out: str | os.PathLike, command: str, force: bool = False, force_hint: bool = True,
                  what: str = "output folder") -> None:
         out = Path(os.path.abspath(out))
-        self.out = out.resolve() if out.is_symlink() else out    # swap the folder, not a link to it
+        self.out = resolved(out) if out.is_symlink() else out    # swap the folder, not a link to it
         self.command = command
         self.force = force
         self.force_hint = force_hint
@@ -284,6 +307,7 @@ class OwnedFolder:
             _remove_left_staging(self.out)
             prefix = f"{staging_prefix(self.out)}{os.getpid()}-"
             self.staging = Path(tempfile.mkdtemp(prefix=prefix, dir=self.out.parent))
+            os.chmod(self.staging, new_folder_mode())     # it becomes OUT: a folder's mode, not mkdtemp's 0700
             (self.staging / STAGING_MARK).write_bytes(b"")
         except BaseException:
             self._lock.release()
@@ -333,3 +357,110 @@ class OwnedFolder:
         finally:
             if self._lock is not None:
                 self._lock.release()
+
+
+# ------------------------------------------------------------------ run folders (gsbench train --out)
+#: what a run folder holds at its top level (gsbench.rundir), and the folder of the report's pictures
+RUN_NAMES = frozenset((rundir.CONFIG, rundir.ENV, rundir.STATUS, rundir.CHECKPOINT, rundir.TRAIN_LOG,
+                       rundir.TRAIN_SUMMARY, rundir.MODEL, rundir.RESULTS, rundir.CELL, rundir.CELL_STATUS))
+RUN_FOLDERS = frozenset((rundir.PREVIEWS,))
+#: the folders of gsbench's own project tree (a checkout), where no run is written
+PROJECT_FOLDERS = ("gsbench", "methods", "datasets", "metrics", "reports", "docs", "tests", "scripts", "benchmarks",
+                   "results", ".git")
+STORE_MARK = "_shared"       # the shared parts folder of a published results store (gsbench.grids.store_format)
+
+
+def _leftover(name: str) -> bool:
+    """What a killed run writer leaves: an atomic write's temporary file, a lock takeover's, the
+    previews' staging folder."""
+    return name.startswith(".") and (name.endswith(".tmp") or name.startswith(f".{rundir.LOCK}.")
+                                     or name.startswith(f".{rundir.PREVIEWS}."))
+
+
+def _is_run_config(path: Path) -> bool:
+    """A run's config.json: a JSON object naming a method, the scene it was trained on and its run id."""
+    try:
+        data = read_json(path)
+    except (InputError, OSError):
+        return False
+    return (isinstance(data, dict) and isinstance(data.get("method"), str) and isinstance(data.get("run_id"), str)
+            and isinstance(data.get("scene"), dict))
+
+
+def first_foreign_in_run(out: Path) -> Optional[str]:
+    """The first entry of OUT (in name order) that is not a run's, or None. A run writes its
+    config.json first (after its lock): without a run's config.json only the lock and a killed
+    writer's leftovers are a run's, so a user's env.json or model.pt is never taken for one."""
+    if not out.is_dir():
+        return None
+    has_config = (out / rundir.CONFIG).is_file() and not (out / rundir.CONFIG).is_symlink() \
+        and _is_run_config(out / rundir.CONFIG)
+    with os.scandir(out) as it:
+        entries = sorted(it, key=lambda en: en.name)
+    for en in entries:
+        name = en.name
+        if en.is_symlink():
+            return name
+        if name in (rundir.LOCK, rundir.LOCK + ".takeover", rundir.CELL, rundir.CELL_STATUS) or _leftover(name):
+            continue
+        if has_config and (name in RUN_NAMES and en.is_file() or name in RUN_FOLDERS and en.is_dir()):
+            continue
+        return name
+    return None
+
+
+def project_root() -> Optional[Path]:
+    """The root of the gsbench checkout this code runs from (the folder above the package holding
+    pyproject.toml), or None for an installed package."""
+    root = Path(__file__).resolve().parent.parent
+    return root if (root / "pyproject.toml").is_file() else None
+
+
+def _within(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def _store_around(real: Path) -> Optional[Path]:
+    """The published results store OUT is (or is inside): a folder holding the store's `_shared` parts."""
+    for folder in (real, *real.parents):
+        try:
+            if (folder / STORE_MARK).is_dir() and not (folder / STORE_MARK).is_symlink():
+                return folder
+        except OSError:      # a path too long to look into: the writer's own error names it next
+            continue
+    return None
+
+
+def _refuse_place(out: Path, real: Path, scene: Optional[Path]) -> None:
+    """Refuse a run folder at the root, in the scene, in gsbench's project tree or in the store."""
+    where = None
+    if real.parent == real:
+        where = "the root of the file system"
+    elif scene is not None and _within(real, resolved(scene)):
+        where = f"the scene folder {resolved(scene)} (or inside it): run files would mix with the scene's"
+    elif (store := _store_around(real)) is not None:
+        where = f"the published results store {store} (or inside it), which only gsbench publish writes"
+    else:
+        root = project_root()
+        pkg = Path(__file__).resolve().parent
+        if root is not None and (real == root or any(_within(real, root / f) for f in PROJECT_FOLDERS)):
+            where = f"gsbench's own project tree {root} (its root or one of its source folders)"
+        elif _within(real, pkg):
+            where = f"gsbench's installed package {pkg}"
+    if where:
+        raise InputError(f"{out}: refused as a run folder: it is {where}; give --out a folder of its own")
+
+
+def check_run_folder(out: str | os.PathLike, scene: Optional[str | os.PathLike] = None) -> None:
+    """The one-line refusal of a `gsbench train --out` that is not a run's folder to write: a place
+    no run belongs (the root, the scene folder, gsbench's project tree, the published store), a file,
+    or a folder holding anything that is not a run's (one named). A new or empty folder, or a run
+    folder to resume, passes."""
+    out = Path(out)
+    real = resolved(out)
+    _refuse_place(out, real, Path(scene) if scene is not None else None)
+    _check_target(out)
+    first = first_foreign_in_run(real)
+    if first is not None:
+        raise InputError(f"{out}: holds files that are not a gsbench run's, e.g. {first}; gsbench train never "
+                         "overwrites them: give --out a new or empty folder (or a run folder to resume)")

@@ -20,7 +20,8 @@ gt_depth (float16 H x W, 0 = none; shape (0, 0) when the scene has no GT depth),
 residual, psnr_outside, impl, size; arrays before, after, gt_after (uint8 H x W x 3), object (uint8 H x W).
 
 The whole folder is replaced at once (`write_previews`): built in a temporary sibling and
-renamed, so a reader never sees pictures of two evaluations mixed.
+renamed, so a reader never sees pictures of two evaluations mixed; the folder gets the mode mkdir
+would give it (the umask respected), not the temporary folder's 0700.
 """
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ import numpy as np
 
 from gsbench import rundir
 from gsbench.errors import InputError
-from gsbench.store import read_json, write_bytes_atomic, write_json_atomic
+from gsbench.store import new_folder_mode, read_json, write_bytes_atomic, write_json_atomic
 
 log = logging.getLogger(__name__)
 PREVIEWS_DIR = rundir.PREVIEWS
@@ -53,6 +54,7 @@ def write_previews(run_dir: Path, manifest: dict, arrays: dict[str, dict[str, np
     final = run_dir / PREVIEWS_DIR
     tmp = Path(tempfile.mkdtemp(prefix=f".{PREVIEWS_DIR}.", dir=run_dir))
     try:
+        os.chmod(tmp, new_folder_mode())     # it becomes previews/: a folder's mode, not mkdtemp's 0700
         for key, arrs in arrays.items():
             buf = io.BytesIO()
             np.savez_compressed(buf, **arrs)

@@ -4,7 +4,7 @@ One home for the layout, so a writer and its readers cannot disagree on a name:
 
     RUN/config.json          the resolved config (gsbench.runs)
     RUN/env.json             the machine and software that trained it
-    RUN/status.json          running | done | failed | nonfinite, with the message (read_status / write_status)
+    RUN/status.json          running | done | failed | nonfinite | interrupted (Ctrl-C, SIGTERM), with the message
     RUN/checkpoint.pt        the last optimisation state (gsbench.runs.training)
     RUN/train_log.jsonl      one line per log / eval step (gsbench.runs.training)
     RUN/train_summary.json   training time, peaks, the method's info

@@ -7,7 +7,7 @@ fsync'ed and renamed over the target, so an interrupted process never leaves a h
 Run folder (one per trained run, NerfBaselines-like, one JSON of results per run):
   config.json       fully resolved config (method, scene, seed, every hyper-parameter, dropped parts)
   env.json          versions, git sha, host, cpu count, torch threads
-  status.json       {"state": "running"|"done"|"failed"|"nonfinite", "message": str, "step": int, ...}
+  status.json       {"state": "running"|"done"|"failed"|"nonfinite"|"interrupted", "message": str, ...}
   train_log.jsonl   one JSON object per line: {"step", "wall_s", "loss": {...}, "eval": {...}?}
   checkpoint.pt     GaussianField state + optimiser state + step (atomic)
   results.json      the schema, the metric names and the builders are in gsbench/results.py
@@ -21,6 +21,8 @@ import json
 import logging
 import math
 import os
+import stat
+import sys
 import tempfile
 from collections import OrderedDict
 from pathlib import Path
@@ -66,8 +68,41 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
+def _umask() -> int:
+    """This process's umask: read from /proc where it can be (os.umask can only be read by setting it,
+    which other threads would see for a moment), else by setting and restoring it once."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def new_folder_mode() -> int:
+    """The mode mkdir gives a new folder (0777 less the umask), for folders tempfile.mkdtemp makes
+    (0700) that become a command's output."""
+    return 0o777 & ~_umask()
+
+
+def _new_file_mode(path: Path) -> int:
+    """The mode a file written at `path` gets: the mode of the file it replaces, else what open()
+    would give a new file (0666 less the umask: 0644 with the usual umask 022)."""
+    try:
+        st = os.stat(path)
+        if stat.S_ISREG(st.st_mode):
+            return stat.S_IMODE(st.st_mode)
+    except OSError:
+        pass
+    return 0o666 & ~_umask()
+
+
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
-    """Write `data` to `path` atomically (temp file in the same folder, fsync, rename).
+    """Write `data` to `path` atomically (temp file in the same folder, fsync, rename). The file gets
+    the mode of the one it replaces, or a new file's mode (umask respected), not mkstemp's 0600.
 
     An OSError that names no file (a write or fsync failing with EFBIG, ENOSPC, EIO) is given `path`,
     so the one-line error says which file could not be written."""
@@ -76,6 +111,7 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
+            os.fchmod(f.fileno(), _new_file_mode(path))
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
@@ -142,6 +178,8 @@ def parse_json(text: str, where: str) -> Any:
         raise InputError(f"{where}: corrupt or truncated JSON ({e.msg} at line {e.lineno})") from None
     except RecursionError:    # the depth check comes first; kept so that no parse ends in a traceback
         raise InputError(f"{where}: refused: JSON nested too deep") from None
+    except ValueError:        # an integer of more digits than Python converts (sys.get_int_max_str_digits)
+        raise InputError(f"{where}: refused: an integer of more than {sys.get_int_max_str_digits()} digits") from None
 
 
 def read_text_bounded(path: Path, max_bytes: int, kind: str) -> str:

@@ -13,10 +13,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from gsbench.errors import InputError
+from gsbench.errors import InputError, shorten
 from gsbench.grids.store import classify, format_store_status, plan_for, publish, read_store, repo_store
 from gsbench.grids.store_format import STORE_VERSION
 from gsbench.grids.store_upgrade import upgrade_store
+from gsbench.store import read_text_bounded
+
+MAX_TEXT_BYTES = 16 * 2**20       # the most of a page or README read
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -74,8 +77,8 @@ def _publish(runs: Path, store: Path, grids: list) -> int:
     rep = publish(runs, store, grids)
     if rep.refused:
         for run_dir, why in rep.refused:
-            print(f"refused: {run_dir}: {why}")
-        raise InputError(f"{runs}: {len(rep.refused)} cells refused (listed above); nothing was published")
+            print(f"refused: {shorten(run_dir)}: {shorten(why, 400)}")
+        raise InputError(f"{shorten(runs)}: {len(rep.refused)} cells refused (listed above); nothing was published")
     for p in rep.written + rep.replaced:
         print(f"published: {p}")
     print(f"gsbench publish: {len(rep.written)} cells added, {len(rep.replaced)} replaced (older numerics version), "
@@ -87,8 +90,8 @@ def _upgrade(store: Path, grids: list) -> int:
     rep = upgrade_store(store, grids)
     if rep.refused:
         for path, why in rep.refused:
-            print(f"refused: {path}: {why}")
-        raise InputError(f"{store}: {len(rep.refused)} cells refused (listed above); nothing was rewritten")
+            print(f"refused: {shorten(path)}: {shorten(why, 400)}")
+        raise InputError(f"{shorten(store)}: {len(rep.refused)} cells refused (listed above); nothing was rewritten")
     for grid, old, new in rep.upgraded:
         print(f"upgraded: {grid}/{old} -> {grid}/{new}")
     print(f"{len(rep.upgraded)} cells upgraded, {rep.current} already in today's layout"
@@ -105,9 +108,22 @@ def _status(store: Path, grids: list) -> int:
 
 
 def _page(args: argparse.Namespace, store: Path, grids: list) -> int:
-    from gsbench.reports.claims_page import build_page, check_page, figure_folder, write_page  # lazy: start-up
+    from gsbench.reports.claims_page import (  # lazy: start-up
+        README_BEGIN,
+        build_page,
+        check_page,
+        figure_folder,
+        readme_with_block,
+        shown_figures,
+        write_page,
+    )
     if args.check and not args.page.is_file():
-        raise InputError(f"{args.page}: page not found (generate it without --check first)")
+        raise InputError(f"{shorten(args.page)}: page not found (generate it without --check first)")
+    readme = read_text_bounded(args.readme, MAX_TEXT_BYTES, "README") if args.readme is not None else None
+    if not args.check:                 # refused before the long part: a page or README gsbench would not write
+        shown_figures(args.page)
+        if readme is not None:
+            readme_with_block(readme, README_BEGIN, shorten(args.readme))
     current, stale = classify(read_store(store), grids)
     page = build_page(current, stale, grids, figure_folder(args.page).name)
     if not args.check:
@@ -116,8 +132,7 @@ def _page(args: argparse.Namespace, store: Path, grids: list) -> int:
         return 0
     folder = figure_folder(args.page)
     names = [p.name for p in folder.glob("dose_*.png")] if folder.is_dir() else []
-    readme = args.readme.read_text(encoding="utf-8") if args.readme is not None else None
-    diff = check_page(page, args.page.read_text(encoding="utf-8"), readme, names)
+    diff = check_page(page, read_text_bounded(args.page, MAX_TEXT_BYTES, "page"), readme, names)
     for line in diff:
         print(line)
     if diff:

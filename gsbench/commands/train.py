@@ -9,6 +9,7 @@ from gsbench import rundir
 from gsbench.config import load_config, set_args
 from gsbench.datasets.loader import SYNTHETIC_META
 from gsbench.method_table import METHODS
+from gsbench.outdir import check_run_folder
 from gsbench.store import read_json
 
 log = logging.getLogger(__name__)
@@ -48,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from gsbench.runs import train_run  # lazy: start-up (cli loads all commands)
 
     cfg = config_from_args(args)
+    check_run_folder(args.out, args.scene)       # never into a folder of someone else's (gsbench.outdir)
     hint = preset_hint(args.preset, Path(args.scene))
     if hint:
         log.warning(hint)

@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
-import cv2
 import numpy as np
 
+from gsbench.datasets.imageio import read_gray
 from gsbench.datasets.ovs import label_masks as rasterise
 from gsbench.datasets.ovs import read_lerf_label
 from gsbench.errors import InputError
@@ -68,13 +68,9 @@ def class_masks(scene, i: int, classes: list[str], width: int, height: int) -> O
 
 
 def read_mask(path: Path) -> np.ndarray:
-    """First channel of a GT mask PNG as stored (3D-OVS GT: 255 = the class)."""
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise InputError(f"{path}: cannot read the image")
-    if img.ndim == 3:
-        img = img[..., 0]
-    return img
+    """First channel of a GT mask PNG (3D-OVS GT: 255 = the class), read as every image is
+    (`read_gray`: its EXIF orientation applied, an unreadable file one InputError naming it)."""
+    return read_gray(path)
 
 
 def query_file(query: str) -> str:

@@ -13,6 +13,10 @@ foreground value, which is 1 or the full scale of the image (255 at 8 bits, 6553
 for a float TIFF); an all-zero mask is empty. Anything else (soft masks, {0, 128}, NaN) is refused.
 Class-index maps (`read_class_map`): one channel of 8- or 16-bit integers, 255 = no class; a
 palette PNG is read as its indices.
+
+EXIF orientation: a file's orientation tag is applied to its size and its pixels alike, with the
+datasets' helpers (`orientation`, `apply_orientation`), so a mask stored sideways is scored upright,
+as a viewer shows it, exactly as the training images are read.
 """
 from __future__ import annotations
 
@@ -23,6 +27,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
+from gsbench.datasets.imageio import apply_orientation, orientation
 from gsbench.errors import InputError
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -37,9 +42,16 @@ BIT_DEPTH = {"b1": "1-bit", "u1": "8-bit", "u2": "16-bit", "i4": "32-bit integer
 
 
 def image_size(path: Path) -> tuple[int, int]:
-    """(width, height) read from the file header, without decoding a pixel. PNG's IHDR is read
-    directly (PIL's open refuses very large images without saying their size); other formats (a
-    float mask is a TIFF) through PIL's lazy open."""
+    """(width, height) as displayed (an EXIF orientation of 5 to 8 swaps them), read from the file
+    header without decoding a pixel."""
+    w, h = _stored_size(path)
+    return (h, w) if orientation(path) >= 5 else (w, h)
+
+
+def _stored_size(path: Path) -> tuple[int, int]:
+    """(width, height) of the stored pixels from the header. PNG's IHDR is read directly (PIL's open
+    refuses very large images without saying their size); other formats (a float mask is a TIFF)
+    through PIL's lazy open."""
     try:
         with open(path, "rb") as fh:
             head = fh.read(24)
@@ -77,16 +89,17 @@ def check_prediction_size(path: Path, pw: int, ph: int, w: int, h: int, what: st
 
 def _decode(path: Path, modes, palette_colours: bool) -> tuple[np.ndarray, str]:
     """The pixels (H, W[, C]) and PIL mode of an image whose mode is in `modes`; a palette image as
-    its colours (palette_colours) or as its indices."""
+    its colours (palette_colours) or as its indices, turned as its EXIF orientation says."""
     try:
         with Image.open(path) as im:
             if im.mode not in modes:
                 raise InputError(f"{path}: a {im.mode} image (PIL mode), not a mask: "
                                  "masks are one channel of 1, 8 or 16 bits (or a float TIFF)")
             mode = im.mode
-            return np.asarray(im.convert("RGB") if mode == "P" and palette_colours else im), mode
+            a = np.asarray(im.convert("RGB") if mode == "P" and palette_colours else im)
     except (UnidentifiedImageError, OSError) as e:
         raise InputError(f"{path}: cannot decode the image ({type(e).__name__})") from None
+    return apply_orientation(a, orientation(path)), mode
 
 
 def _values_text(a: np.ndarray) -> str:

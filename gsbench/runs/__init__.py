@@ -26,7 +26,7 @@ from gsbench.config import run_config, run_id, setting
 from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.device import resolve_device
 from gsbench.environment import PeakMemory, env_info
-from gsbench.errors import InputError, NonFiniteError, interrupted
+from gsbench.errors import InputError, NonFiniteError, Terminated, interrupted
 from gsbench.methods.registry import get_method, resolve_for_scene
 from gsbench.render.threads import numba_threading_layer
 from gsbench.runlock import RunLock
@@ -114,7 +114,8 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
         if not interrupted(e):
             rundir.write_status(run_dir, "failed", f"{type(e).__name__}: {e}", train_s_so_far=so_far)
             raise
-        rundir.write_status(run_dir, "failed", "interrupted; re-run to resume from the last checkpoint",
+        how = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
+        rundir.write_status(run_dir, "interrupted", f"{how}; re-run to resume from the last checkpoint",
                             train_s_so_far=so_far)
         if isinstance(e, KeyboardInterrupt):
             raise
@@ -133,7 +134,11 @@ def _finish(run_dir: Path, method, cfg: dict, state: str, message: str, train_s:
     steps = [int(r["step"]) for r in log if "step" in r]
     last_eval = next((r["eval"] for r in reversed(log) if "eval" in r), None)
     n = method.field.num if getattr(method, "field", None) is not None else None
-    summary = {"run_id": cfg.get("run_id"), "method": cfg["method"], "status": state, "message": message,
+    # the identity of the config as written (after the resolver): `gsbench eval` recomputes it from
+    # config.json and refuses an edited one (gsbench.evaluation.trained_run.check_identity)
+    fp = (cfg.get("scene") or {}).get("fingerprint")
+    summary = {"run_id": cfg.get("run_id"), "resolved_config_id": run_id(cfg, fp) if isinstance(fp, str) else None,
+               "method": cfg["method"], "status": state, "message": message,
                "train_s": train_s, "peak_rss_mb": peaks["peak_rss_mb"], "rss_source": peaks["rss_source"],
                "iterations": max(steps) if steps else 0, "n_gaussians": n,
                "providers": method.provider_ids(), "dropped": cfg.get("dropped", {}), "backend": method.backend,

@@ -11,17 +11,22 @@ recipe with the method's loss; twostage yields two). For each phase this module 
 - periodic evaluation every `train.eval_every` steps: PSNR / SSIM on the eval views and, for a
   semantic field, the segmentation mIoU with gsbench.evaluation's own code;
 - checkpoints every `train.checkpoint_every` steps and at the end of each phase;
+- SIGTERM: the step under way ends, is checkpointed, and the run stops as after Ctrl-C
+  (`sigterm_stops_training`; status "interrupted", the CLI exits 143);
 - non-finite checks at those steps only (the loop's only host synchronisation points), so a
   non-finite loss is reported with its exact step and no checkpoint is written after it.
 It sends the phase's final field back to the method, which goes on to its next phase or finishes.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
+import signal
+import threading
 import time
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable, Iterator, Optional
 
 import numpy as np
 import torch
@@ -29,20 +34,51 @@ from tqdm import tqdm
 
 from gsbench import rundir
 from gsbench.config import setting
-from gsbench.errors import InputError
+from gsbench.errors import InputError, Terminated
 from gsbench.evaluation import segmentation_metrics
 from gsbench.gaussians import GaussianField
-from gsbench.train.trainer import Trainer, load_checkpoint_if_any
 from gsbench.metrics import psnr, ssim
 from gsbench.render import render
 from gsbench.store import append_jsonl, read_jsonl, save_torch_atomic, write_text_atomic
+from gsbench.train.trainer import Trainer, load_checkpoint_if_any
 
 log = logging.getLogger(__name__)
 
 
+_SIGTERM = {"in_steps": False, "received": False}
+
+
+@contextlib.contextmanager
+def sigterm_stops_training() -> Iterator[None]:
+    """SIGTERM while training ends the run as Ctrl-C does (gsbench.errors.Terminated): during the steps
+    of a phase at the end of the current step, after a checkpoint of it (run_phase); anywhere else at
+    once (the run resumes from its last checkpoint). Only the main thread can take signals: elsewhere
+    SIGTERM keeps its handler."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def on_sigterm(signum, frame) -> None:
+        if _SIGTERM["in_steps"]:
+            _SIGTERM["received"] = True
+        else:
+            raise Terminated()
+    _SIGTERM.update(in_steps=False, received=False)
+    old = signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+        _SIGTERM.update(in_steps=False, received=False)
+
+
 def train_method(method, scene, run_dir: Path, config: dict, progress: bool = True) -> None:
     """Train `method` on `scene` into `run_dir`, resuming from its checkpoint when there is one."""
-    run_dir = Path(run_dir)
+    with sigterm_stops_training():
+        _train_method(method, scene, Path(run_dir), config, progress)
+
+
+def _train_method(method, scene, run_dir: Path, config: dict, progress: bool) -> None:
     resume = load_checkpoint_if_any(run_dir)
     phases = method.train_phases(scene, run_dir, config, resume=resume, progress=progress)
     try:
@@ -66,6 +102,39 @@ def run_phase(tr: Trainer, run_dir: Path, eval_fn: Optional[Callable[[GaussianFi
         # drop log lines written after the checkpoint (they will be produced again)
         lines = [r for r in read_jsonl(log_path) if r.get("phase") != tr.phase or int(r.get("step", 0)) <= tr.step]
         write_text_atomic(log_path, "".join(json.dumps(r) + "\n" for r in lines))
+    bar = tqdm(total=tr.iterations, initial=tr.step, desc=f"train[{tr.phase}]", disable=not progress,
+               dynamic_ncols=True, leave=False)
+    _SIGTERM["in_steps"] = True
+    try:
+        _steps(tr, run_dir, eval_fn, log_path, bar)
+    finally:
+        _SIGTERM["in_steps"] = False
+        bar.close()
+    tr.synchronize()
+    tr.raise_if_bad()
+    tr.check_finite("parameters")
+    save_torch_atomic(Path(run_dir) / rundir.CHECKPOINT, tr.state())
+    if _SIGTERM["received"]:        # came after the last step: the phase is whole and checkpointed
+        raise Terminated()
+    return tr.field
+
+
+def _stop_if_terminated(tr: Trainer, run_dir: Path) -> None:
+    """After a step: when SIGTERM came during it, checkpoint this step (a finite one) and stop."""
+    if not _SIGTERM["received"]:
+        return
+    tr.synchronize()
+    tr.raise_if_bad()
+    tr.check_finite("parameters")
+    save_torch_atomic(Path(run_dir) / rundir.CHECKPOINT, tr.state())
+    log.warning("SIGTERM: stopped phase %s at step %d of %d; its checkpoint is saved", tr.phase, tr.step,
+                tr.iterations)
+    raise Terminated()
+
+
+def _steps(tr: Trainer, run_dir: Path, eval_fn: Optional[Callable[[GaussianField], dict]], log_path: Path,
+           bar) -> None:
+    """The phase's steps from tr.step to its last iteration (logs, evaluations and checkpoints between)."""
     log_every = max(1, int(setting(tr.cfg, "train.log_every")))
     eval_every = int(setting(tr.cfg, "train.eval_every"))
     ckpt_every = int(setting(tr.cfg, "train.checkpoint_every"))
@@ -73,8 +142,6 @@ def run_phase(tr: Trainer, run_dir: Path, eval_fn: Optional[Callable[[GaussianFi
     acc_w: dict = {}
     acc_n = 0
     skipped: dict = {}
-    bar = tqdm(total=tr.iterations, initial=tr.step, desc=f"train[{tr.phase}]", disable=not progress,
-               dynamic_ncols=True, leave=False)
     while tr.step < tr.iterations:
         t0 = time.perf_counter()
         out = tr.train_iteration()
@@ -119,12 +186,7 @@ def run_phase(tr: Trainer, run_dir: Path, eval_fn: Optional[Callable[[GaussianFi
             append_jsonl(log_path, {"phase": tr.phase, "step": step, "wall_s": round(tr.elapsed, 4), "eval": ev})
         if is_ckpt:
             save_torch_atomic(Path(run_dir) / rundir.CHECKPOINT, tr.state())
-    bar.close()
-    tr.synchronize()
-    tr.raise_if_bad()
-    tr.check_finite("parameters")
-    save_torch_atomic(Path(run_dir) / rundir.CHECKPOINT, tr.state())
-    return tr.field
+        _stop_if_terminated(tr, run_dir)
 
 
 def periodic_eval(method, scene, tr: Trainer, config: dict) -> Callable[[GaussianField], dict]:

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import re
 import shutil
+import stat
 
 import numpy as np
 import pytest
@@ -27,6 +29,18 @@ def test_previews_round_trip_and_replace_whole_folder(tmp_path):
     files = sorted(p.name for p in (tmp_path / PREVIEWS_DIR).iterdir())
     assert files == ["3dovs_frame_00001.npz", MANIFEST]
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]   # no temporary folder left
+
+
+@pytest.mark.parametrize("umask,folder,file", [(0o022, 0o755, 0o644), (0o027, 0o750, 0o640)])
+def test_previews_folder_gets_a_new_folders_mode(tmp_path, umask, folder, file):
+    """previews/ is staged in a mkdtemp folder (0700): it gets what mkdir would give (the umask's)."""
+    old = os.umask(umask)
+    try:
+        fake_previews(tmp_path, "vanilla", semantic=False)
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / PREVIEWS_DIR).stat().st_mode) == folder
+    assert {stat.S_IMODE(f.stat().st_mode) for f in (tmp_path / PREVIEWS_DIR).iterdir()} == {file}
 
 
 def test_read_arrays_refuses_pickled_objects(tmp_path):
@@ -123,7 +137,7 @@ def test_eval_saves_previews_that_reproduce_the_scored_numbers(tmp_path):
     the configured query mode: two code paths (scoring, pictures) agree. eval.previews=0 deletes them."""
     from tiny import TINY_SET
 
-    from gsbench.config import load_config
+    from gsbench.config import load_config, run_id
     from gsbench.datasets.synthetic import make_scene
     from gsbench.evaluation import evaluate_run
     from gsbench.metric_table import seg_metric
@@ -147,8 +161,12 @@ def test_eval_saves_previews_that_reproduce_the_scored_numbers(tmp_path):
     for r in m["removal"]:
         assert 0.0 <= r["residual"] <= 1.0 and r["query"] in read_json(scene / "gsbench_scene.json")["class_names"]
     cfg = read_json(run / "config.json")
-    cfg["eval"]["previews"] = 0
+    cfg["eval"]["previews"] = 0           # as if trained so: the run's ids follow (eval checks them)
+    cfg["run_id"] = run_id(cfg, cfg["scene"]["fingerprint"])
     write_json_atomic(run / "config.json", cfg)
+    summary = read_json(run / "train_summary.json")
+    summary["run_id"], summary["resolved_config_id"] = cfg["run_id"], run_id(cfg, cfg["scene"]["fingerprint"])
+    write_json_atomic(run / "train_summary.json", summary)
     evaluate_run(run, progress=False)
     assert not (run / PREVIEWS_DIR).exists()
 

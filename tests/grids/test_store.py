@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from tiny_store import TINY_GRID
 
 from gsbench import grids
 from gsbench.cli import main
@@ -22,12 +23,7 @@ from gsbench.grids.store_format import SHARED_DIR, read_record
 from gsbench.numerics import NUMERICS_VERSION
 from gsbench.store import read_json
 
-GRID = {"study": "tiny-test",
-        "base": {"method": "vanilla", "preset": "cpu-small",
-                 "set": {"train.iterations": 3, "train.max_width": 32, "train.eval_every": 0, "eval.previews": 0,
-                         "eval.fps_warmup": 0, "eval.fps_repeats": 1}},
-        "scenes": [{"preset": "tabletop-small", "views": 8, "resolution": [32, 24]}], "seeds": [0],
-        "axes": {"train.lambda_dssim": [0.2, 0.0]}}
+GRID = TINY_GRID
 
 
 def _write_grid(path: Path, iterations: int = 3) -> Path:
@@ -204,6 +200,22 @@ def test_verify_exact_then_tampered(published, tmp_path, capsys):
     out = capsys.readouterr().out
     psnr = next(ln for ln in out.splitlines() if ln.strip().startswith("psnr "))
     assert psnr.rstrip().endswith("MISMATCH") and "1 mismatched" in out
+
+
+def test_verify_on_another_cpu_judges_by_the_seed_spread(published, capsys, monkeypatch):
+    """The same re-run on a faked CPU name: no exact comparison, each metric against its setting's seeds
+    (the tiny plan has one seed per setting, so none is judged, and the output says so)."""
+    from gsbench.grids import verify as verify_mod
+    _, _, store = published
+    monkeypatch.setattr(verify_mod, "cpu_facts", lambda: {"cpu_model": "Faked CPU 9000", "cpu_flags": "0" * 16,
+                                                          "physical_cores": 2})
+    capsys.readouterr()
+    assert main(["verify", str(store), "--cells", "1", "--seed", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "judged by the seed spread" in out and "this machine Faked CPU 9000" in out and "exact (same" not in out
+    psnr = next(ln for ln in out.splitlines() if ln.strip().startswith("psnr "))
+    assert psnr.rstrip().endswith("no seed spread") and "none (1)" in psnr
+    assert "0 outside the seed spread" in out
 
 
 def _as_layout1(store: Path, fake_id: str) -> tuple[Path, str, dict]:

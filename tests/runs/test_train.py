@@ -131,7 +131,7 @@ def test_resume_after_interruption_matches_uninterrupted(scene, tmp_path, monkey
     real = fail_render_at(monkeypatch, 17, KeyboardInterrupt())
     with pytest.raises(KeyboardInterrupt):
         train_run(cfg, scene, tmp_path / "int", progress=False)
-    assert read_json(tmp_path / "int" / "status.json")["state"] == "failed"
+    assert read_json(tmp_path / "int" / "status.json")["state"] == "interrupted"
     assert load_torch(tmp_path / "int" / "checkpoint.pt")["step"] == 10
     monkeypatch.setattr(T, "render", real)
     train_run(cfg, scene, tmp_path / "int", progress=False)

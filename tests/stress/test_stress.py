@@ -135,4 +135,6 @@ def test_full_battery_passes_via_the_executable(tmp_path):
     assert len(df) == len(cases) + len(hostile) + len(skipped) and not skipped
     assert df["pass"].all()
     assert set(REQUIRED_COMPONENTS) <= set(df["component"])
-    assert {f"hostile:{a}" for a in ("config", "data", "eval", "output")} <= set(df["component"])
+    hostile_areas = {f"hostile:{a}" for a in ("config", "data", "eval", "output", "store")}
+    assert hostile_areas <= set(df["component"])
+    assert {c.component for c in hostile} == hostile_areas     # a new area is named here too

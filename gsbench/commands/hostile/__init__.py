@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from gsbench.cli import main
+from gsbench.errors import bounded_line
 from gsbench.stress.core import Case, CaseResult
 
 MAX_LINE = 400          # an error line longer than this echoes the input instead of naming it
@@ -115,7 +116,7 @@ def _judge(h: Hostile, folder: Path, argv: list[str], code: int, err: str) -> Op
         return "traceback printed"
     if h.exit_code is not None and code != h.exit_code:
         return f"exit {code}, expected {h.exit_code}"
-    if code != 0:
+    if code not in (0, 130, 143):      # an interruption (Ctrl-C, SIGTERM) ends in its own line, not an error
         lines = [ln for ln in err.splitlines() if ln.strip()]
         prefix = f"gsbench {argv[0]}: error:"
         if not lines or not lines[-1].startswith(prefix):
@@ -145,7 +146,7 @@ def run_hostile(h: Hostile) -> CaseResult:
         why = _judge(h, folder, argv, code, text)
         last = ([ln for ln in text.splitlines() if ln.strip()] or [""])[-1]
         res.passed = why is None
-        command = " ".join(["gsbench", *argv]).replace(str(folder), "DIR")
+        command = bounded_line(" ".join(["gsbench", *argv]).replace(str(folder), "DIR"))
         res.note = (why + ": " if why else "") + f"`{command}` -> exit {code}: {last[:MAX_LINE]}".replace(
             str(folder), "DIR")
     except _Timeout:
@@ -167,7 +168,8 @@ def hostile_cases() -> list[Case]:
     from gsbench.commands.hostile.data import CASES as data_cases  # lazy: the area modules import this one
     from gsbench.commands.hostile.eval import CASES as eval_cases  # lazy: the area modules import this one
     from gsbench.commands.hostile.output import CASES as output_cases  # lazy: the area modules import this one
+    from gsbench.commands.hostile.store import CASES as store_cases  # lazy: the area modules import this one
     out = []
-    for h in [*config_cases, *data_cases, *eval_cases, *output_cases]:
+    for h in [*config_cases, *data_cases, *eval_cases, *output_cases, *store_cases]:
         out.append(Case(f"hostile:{h.area}", h.name, functools.partial(run_hostile, h)))
     return out

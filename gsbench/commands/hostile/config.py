@@ -102,6 +102,29 @@ def _other_method(cfg: dict) -> dict:
     return {**cfg, "method": "vanilla"}
 
 
+def _edited(path: str, value: object) -> Callable[[dict], dict]:
+    """config.json with the dotted key `path` set to `value` (a hand edit after training)."""
+    def edit(cfg: dict) -> dict:
+        *parents, leaf = path.split(".")
+        d = cfg
+        for p in parents:
+            d = d[p]
+        d[leaf] = value
+        return cfg
+    return edit
+
+
+def _without(key: str) -> Callable[[dict], dict]:
+    return lambda cfg: {k: v for k, v in cfg.items() if k != key}
+
+
+def _interrupted_run(folder: Path) -> list[str]:
+    """A run whose status.json says it was interrupted (Ctrl-C or SIGTERM) before it finished."""
+    run = tiny_run(folder / "run")
+    (run / "status.json").write_text(json.dumps({"state": "interrupted", "message": "terminated (SIGTERM)"}))
+    return ["eval", str(run), "--no-progress"]
+
+
 def _collect(write_bad: Callable[[Path], None]) -> Callable[[Path], list[str]]:
     """`gsbench collect` on a good run's results.json and a bad one written by `write_bad(path)`."""
     def build(folder: Path) -> list[str]:
@@ -187,4 +210,18 @@ CASES: list[Hostile] = [
           "config.json", "no scene path"),
     _case("run config.json: another method than its model", _run_config(_other_method, "gaussiands"),
           "config.json", "'vanilla'", "'gaussiands'"),
+    # a run's identity: config.json must still give the run id it was trained under
+    _case("run config.json: seed edited after training", _run_config(_edited("seed", 7)), "config.json",
+          "does not give the run's id"),
+    _case("run config.json: gaussiands.lambdas.sem edited after training",
+          _run_config(_edited("gaussiands.lambdas.sem", 0.5), "gaussiands"), "config.json",
+          "does not give the run's id"),
+    _case("run config.json: scene fingerprint edited", _run_config(_edited("scene.fingerprint", "0" * 16)),
+          "config.json", "does not give the run's id"),
+    _case("run config.json: no run_id", _run_config(_without("run_id")), "config.json", "no run_id"),
+    _case("eval of a run interrupted by SIGTERM", _interrupted_run, "run", "not finished", "'interrupted'"),
+    # CLI input: an unbounded value is never echoed whole
+    _case("--set with a 10,000-character key", _set("x" * 10_000 + "=1"), "xxx...xxx"),
+    _case("--set with a 10,000-character value", _set("train.background=" + "y" * 10_000), "train.background",
+          "yyy...yyy"),
 ]

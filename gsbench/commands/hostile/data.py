@@ -14,7 +14,7 @@ import struct
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -79,6 +79,12 @@ def _image_name(name: str) -> Callable:
     def edit(rec, image) -> None:
         image.name = name
     return edit
+
+
+def _duplicate_name(rec, image) -> None:
+    """A second image named VIEW: the COLMAP model holds two poses for one picture."""
+    other = next(im for im in rec.images.values() if im.name != VIEW)
+    other.name = VIEW
 
 
 def _llff(edit: Callable[[np.ndarray], None]) -> Callable[[Path], None]:
@@ -211,6 +217,65 @@ def png_header(path: Path, width: int, height: int) -> None:
     path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IEND", b""))
 
 
+def _truncate(path: Path, lose: int = 0) -> None:
+    """The file cut short (a download that stopped): its last `lose` bytes gone, or (0) its second
+    half; its header still reads."""
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) - lose] if lose else data[:len(data) // 2])
+
+
+JPG = VIEW.replace(".png", ".jpg")
+EXIF_ORIENTATION = 0x0112
+
+
+def write_jpeg(path: Path, pixels: np.ndarray, orientation: int = 1, quality: int = 95) -> None:
+    """An 8-bit RGB JPEG of `pixels` (H x W x 3), with an EXIF orientation tag when it is not 1."""
+    from PIL import Image  # lazy: only the JPEG cases write one
+
+    im = Image.fromarray(pixels)
+    exif = Image.Exif()
+    if orientation != 1:
+        exif[EXIF_ORIENTATION] = orientation
+    im.save(path, format="JPEG", quality=quality, exif=exif.tobytes())
+
+
+def _as_jpeg(scene: Path, pixels: np.ndarray, orientation: int = 1) -> None:
+    """VIEW replaced by a JPEG of `pixels`, in gsbench_scene.json's image names too."""
+    write_jpeg(scene / "images" / JPG, pixels, orientation)
+    (scene / "images" / VIEW).unlink()
+    meta = scene / "gsbench_scene.json"
+    d = json.loads(meta.read_text())
+    d["image_names"] = [JPG if n == VIEW else n for n in d["image_names"]]
+    meta.write_text(json.dumps(d))
+
+
+def _sideways_jpeg(scene: Path, size_in_json: str) -> None:
+    """The nerf layout whose VIEW is a JPEG stored turned a quarter counter-clockwise with EXIF
+    orientation 6 (shown upright: the 32x24 view), as a phone stores a picture taken upright.
+    size_in_json: "none" (no w/h: the size comes from the file), "stored" (w/h of the stored pixels)."""
+    from PIL import Image  # lazy: only the JPEG cases read one
+
+    upright = np.asarray(Image.open(scene / "images" / VIEW).convert("RGB"))
+    _as_jpeg(scene, np.ascontiguousarray(np.rot90(upright, 1)), orientation=6)
+
+    def edit(frame: dict) -> None:
+        frame["file_path"] = f"images/{JPG}"
+        if size_in_json == "none":
+            del frame["w"], frame["h"]
+        else:
+            frame["w"], frame["h"] = frame["h"], frame["w"]
+    nerf_scene(scene, edit)
+
+
+def _truncated_jpeg(scene: Path) -> None:
+    """The nerf layout whose VIEW is a JPEG cut in half."""
+    from PIL import Image  # lazy: only the JPEG cases read one
+
+    _as_jpeg(scene, np.asarray(Image.open(scene / "images" / VIEW).convert("RGB")))
+    _truncate(scene / "images" / JPG, lose=40)     # the header (EXIF, tables) is most of a 32x24 JPEG
+    nerf_scene(scene, lambda frame: frame.update(file_path=f"images/{JPG}"))
+
+
 CORRUPTIONS: list[Corruption] = [
     Corruption("colmap-negative-focal", _colmap(_set_params([-30.0, 30.0, 16.0, 12.0])),
                ("cameras.bin", VIEW, "fx=-30 is not positive")),
@@ -252,6 +317,11 @@ CORRUPTIONS: list[Corruption] = [
     Corruption("gt-dir-outside", _gt_dir_outside, ("gsbench_scene.json", "gt_dir", "lies outside the scene folder")),
     Corruption("image-header-20000x20000", lambda s: png_header(s / "images" / VIEW, 20000, 20000),
                (VIEW, "image is 20000x20000, more than the 100000000 pixels")),
+    Corruption("colmap-two-images-one-name", _colmap(_duplicate_name), ("images.bin", "both named", VIEW)),
+    Corruption("image-truncated-png", lambda s: _truncate(s / "images" / VIEW), (VIEW, "cannot decode image")),
+    Corruption("image-truncated-jpeg", _truncated_jpeg, (JPG, "cannot decode image")),
+    Corruption("exif-orientation-6-against-stored-w-h", lambda s: _sideways_jpeg(s, "stored"),
+               (JPG, "image is 32x24", "transforms.json says 24x32")),
 ]
 
 
@@ -263,4 +333,31 @@ def _train_case(c: Corruption) -> Hostile:
     return Hostile("data", c.name, build, c.expect)
 
 
-CASES: list[Hostile] = [_train_case(c) for c in CORRUPTIONS]
+def _sideways_case(folder: Path) -> list[str]:
+    scene = tiny_scene(folder / "scene")
+    _sideways_jpeg(scene, "none")
+    return ["train", "--scene", str(scene), "--out", str(folder / "run"), *TRAIN_ARGS]
+
+
+def _trained_upright(folder: Path, code: int, err: str) -> Optional[str]:
+    """The sideways JPEG is read upright: its camera is 32x24 like the pixels training reads, and those
+    are the view's own (JPEG-close to the PNG it was made from)."""
+    from PIL import Image  # lazy: only this check reads one
+
+    from gsbench.datasets import load_scene  # lazy: the check only
+
+    scene = load_scene(folder / "scene")
+    i = [Path(p).name for p in scene.image_paths].index(JPG)
+    cam, img = scene.cameras[i], scene.image(i)
+    if (cam.width, cam.height) != (32, 24) or img.shape != (24, 32, 3):
+        return f"camera {cam.width}x{cam.height}, pixels {img.shape[1]}x{img.shape[0]}: expected 32x24 for both"
+    stored = np.asarray(Image.open(folder / "scene" / "images" / JPG).convert("RGB"), dtype=np.float32) / 255
+    upright = np.rot90(stored, -1)
+    err_px = float(np.abs(img - upright).mean())      # two JPEG decoders: close, not always equal
+    return None if err_px < 0.02 else f"pixels differ from the stored ones turned upright by {err_px:.3f} on average"
+
+
+CASES: list[Hostile] = [_train_case(c) for c in CORRUPTIONS] + [
+    Hostile("data", "exif-orientation-6-without-w-h trains upright", _sideways_case, exit_code=0,
+            check=_trained_upright),
+]

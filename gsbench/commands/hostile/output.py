@@ -1,4 +1,4 @@
-"""Hostile inputs: folders a command writes: report, make-scene, stress, claims, ablate, points.
+"""Hostile inputs: folders a command writes: report, make-scene, stress, claims, ablate, points, train.
 
 A folder that holds someone else's files is refused, or with --force written beside them; nothing
 a command did not write is ever deleted or overwritten; a second writer into a folder fails with one
@@ -11,14 +11,19 @@ import functools
 import io
 import json
 import os
+import signal
 import socket
+import stat
+import threading
 import time
 from pathlib import Path
 from typing import Callable, Optional
 
+import gsbench
 from gsbench.cli import main
-from gsbench.commands.hostile import Hostile, _base_dir, tiny_run
+from gsbench.commands.hostile import Hostile, _base_dir, tiny_run, tiny_scene
 from gsbench.grids.claims_plan import CLAIM_GRIDS
+from gsbench.outdir import project_root
 
 ME_JPG = b"\xff\xd8\xff\xe0 a holiday picture"
 THESIS = "\\section{Results} my own words\n"
@@ -155,6 +160,144 @@ def _points_foreign(folder: Path) -> list[str]:
     return ["points", str(scene), "--force"]
 
 
+# ------------------------------------------------------------------ train --out: run folders
+TRAIN = ["--method", "vanilla", "--preset", "cpu-small", "--set", "train.iterations=2", "--set", "train.eval_every=0",
+         "--no-progress", "--quiet"]
+# the arguments the battery's tiny run was trained with (gsbench.commands.hostile._tiny_run): its run id
+TINY_RUN_ARGS = [*TRAIN, "--set", "priors.masks.provider=gt", "--set", "semantic.autoencoder.epochs=2"]
+MODEL_PT = b"my own model"
+
+
+def _train(folder: Path, out: Path | str, *extra: str) -> list[str]:
+    return ["train", "--scene", str(tiny_scene(folder / "scene")), "--out", str(out), *TRAIN, *extra]
+
+
+def _train_users_files(folder: Path) -> list[str]:
+    (folder / "R").mkdir()
+    (folder / "R" / "env.json").write_text('{"mine": true}')
+    (folder / "R" / "model.pt").write_bytes(MODEL_PT)
+    return _train(folder, folder / "R")
+
+
+def _train_into_scene(folder: Path) -> list[str]:
+    scene = tiny_scene(folder / "scene")
+    return ["train", "--scene", str(scene), "--out", str(scene), *TRAIN]
+
+
+def _train_inside_scene(folder: Path) -> list[str]:
+    scene = tiny_scene(folder / "scene")
+    return ["train", "--scene", str(scene), "--out", str(scene / "images" / "run"), *TRAIN]
+
+
+def _train_into_project(folder: Path) -> list[str]:
+    root = project_root() or Path(gsbench.__file__).resolve().parent
+    return _train(folder, root)
+
+
+def _train_into_store(folder: Path) -> list[str]:
+    """A copy of a published store's layout: _shared/ parts and a grid folder of cells."""
+    store = folder / "store"
+    (store / "_shared").mkdir(parents=True)
+    (store / "_shared" / "0123456789abcdef.json").write_text("{}\n")
+    (store / "lambda_grid-cpu").mkdir()
+    (store / "lambda_grid-cpu" / "02f0628ea601f44d.json").write_text('{"store_version": 2}\n')
+    return _train(folder, store / "lambda_grid-cpu" / "mine")
+
+
+def _loop(folder: Path) -> Path:
+    (folder / "loop").symlink_to("loop")
+    return folder / "loop"
+
+
+def _train_resume(folder: Path) -> list[str]:
+    """The battery's tiny run, left as an interrupted run: status "interrupted", a stale lock (a
+    process that is gone), an atomic write's leftover temporary file. Training resumes it."""
+    run = tiny_run(folder / "run")
+    (run / "status.json").write_text(json.dumps({"state": "interrupted", "message": "terminated (SIGTERM)"}))
+    (run / "writer.lock").write_text(json.dumps({"pid": 2 ** 22 + 1, "host": socket.gethostname(),
+                                                 "started": time.time(), "command": "gone", "token": "x"}))
+    (run / ".config.json.abc123.tmp").write_text("{")
+    return ["train", "--scene", str(_scene_of(run)), "--out", str(run), *TINY_RUN_ARGS]
+
+
+def _scene_of(run: Path) -> Path:
+    return Path(json.loads((run / "config.json").read_text())["scene"]["path"])
+
+
+def _train_link_in_run(folder: Path) -> list[str]:
+    """A run folder whose model.pt is a link to a user's file elsewhere."""
+    run = tiny_run(folder / "run")
+    (folder / "mine.pt").write_bytes(MODEL_PT)
+    (run / "model.pt").unlink()
+    (run / "model.pt").symlink_to(folder / "mine.pt")
+    return ["train", "--scene", str(_scene_of(run)), "--out", str(run), *TINY_RUN_ARGS]
+
+
+def _train_out_file(folder: Path) -> list[str]:
+    (folder / "R").write_text("my notes")
+    return _train(folder, folder / "R")
+
+
+def _long_path(folder: Path) -> Path:
+    """A path of 10,000 characters: 40 folder names of 250 characters (each a legal name)."""
+    return folder.joinpath(*(["d" * 250] * 40))
+
+
+def _status_is(state: str, *words: str) -> Callable[[Path, int, str], Optional[str]]:
+    def check(folder: Path, code: int, err: str) -> Optional[str]:
+        st = json.loads((folder / "run" / "status.json").read_text())
+        if st.get("state") != state or not all(w in st.get("message", "") for w in words):
+            return f"status.json is {st.get('state')!r} ({st.get('message')!r}), expected {state!r}"
+        return None if (folder / "run" / "checkpoint.pt").is_file() else "no checkpoint.pt"
+    return check
+
+
+def _sigterm_train(folder: Path) -> list[str]:
+    """A long run that gets SIGTERM (from a thread of this process) once it is in its steps."""
+    if threading.current_thread() is not threading.main_thread():
+        raise RuntimeError("the SIGTERM case needs the main thread (signals go to it)")
+    run = folder / "run"
+
+    def ours() -> bool:
+        return getattr(signal.getsignal(signal.SIGTERM), "__name__", "") == "on_sigterm"
+
+    def fire() -> None:
+        deadline = time.time() + 50
+        while time.time() < deadline:
+            if (run / "train_log.jsonl").exists() and ours():    # never the default handler: it would kill us
+                os.kill(os.getpid(), signal.SIGTERM)
+                return
+            time.sleep(0.05)
+    threading.Thread(target=fire, daemon=True).start()
+    return ["train", "--scene", str(tiny_scene(folder / "scene")), "--out", str(run), "--method", "vanilla",
+            "--preset", "cpu-small", "--set", "train.iterations=100000", "--set", "train.eval_every=0",
+            "--set", "train.log_every=1", "--set", "train.checkpoint_every=0", "--no-progress", "--quiet"]
+
+
+def _terminated_line(folder: Path, code: int, err: str) -> Optional[str]:
+    last = ([ln for ln in err.splitlines() if ln.strip()] or [""])[-1]
+    if "terminated (SIGTERM)" not in last:
+        return f"last line {last[:200]!r} does not say terminated (SIGTERM)"
+    return _status_is("interrupted", "SIGTERM")(folder, code, err)
+
+
+def _report_mode(folder: Path, code: int, err: str) -> Optional[str]:
+    """Atomically written files get a new file's mode (0666 less the umask), not mkstemp's 0600; the
+    folder, a new folder's (0777 less the umask), not mkdtemp's 0700."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    want = 0o666 & ~mask
+    got = stat.S_IMODE(os.stat(folder / "P" / "index.html").st_mode)
+    if got != want:
+        return f"index.html has mode {got:o}, expected {want:o}"
+    got = stat.S_IMODE(os.stat(folder / "P").st_mode)
+    return None if got == 0o777 & ~mask else f"the report folder has mode {got:o}, expected {0o777 & ~mask:o}"
+
+
+def _no_lock_named(folder: Path, code: int, err: str) -> Optional[str]:
+    return "the line names the report's own lock" if "writer.lock" in err else None
+
+
 def _kept(rel: str, want: str | bytes) -> Callable[[Path, int, str], Optional[str]]:
     def check(folder: Path, code: int, err: str) -> Optional[str]:
         p = folder / rel
@@ -204,6 +347,41 @@ CASES: list[Hostile] = [
             check=_checks(_kept("out/results.csv", "mine\n"), _only("out", {"results.csv"}))),
     Hostile("output", "make-scene into a folder that is not empty", _make_scene_nonempty, ("not an empty folder",),
             check=_checks(_kept("out/me.jpg", ME_JPG), _only("out", {"me.jpg"}))),
+    # train --out: a run folder is a run's, never a user's folder, the scene, the project or the store
+    Hostile("output", "train --out a folder holding a user's env.json and model.pt", _train_users_files,
+            ("R: holds files that are not a gsbench run's", "env.json"),
+            check=_checks(_kept("R/env.json", '{"mine": true}'), _kept("R/model.pt", MODEL_PT),
+                          _only("R", {"env.json", "model.pt"}))),
+    Hostile("output", "train --out /", lambda f: _train(f, "/"), ("/: refused as a run folder", "root")),
+    Hostile("output", "train --out the scene folder", _train_into_scene, ("refused as a run folder", "scene folder"),
+            check=lambda f, c, e: "config.json written into the scene" if (f / "scene" / "config.json").exists()
+            else None),
+    Hostile("output", "train --out a folder inside the scene", _train_inside_scene, ("scene folder",),
+            check=lambda f, c, e: "run written into the scene" if (f / "scene" / "images" / "run").exists() else None),
+    Hostile("output", "train --out gsbench's project tree", _train_into_project, ("refused as a run folder",)),
+    Hostile("output", "train --out inside a copy of the published store", _train_into_store,
+            ("published results store",), check=_only("store", {"_shared", "lambda_grid-cpu"})),
+    Hostile("output", "train --out a file", _train_out_file, ("R: exists and is not a folder",),
+            check=_kept("R", "my notes")),
+    Hostile("output", "train --out a run folder whose model.pt links to a user's file", _train_link_in_run,
+            ("not a gsbench run's", "model.pt"), check=_kept("mine.pt", MODEL_PT)),
+    Hostile("output", "train resumes an interrupted run (stale lock, leftover temporary file)", _train_resume,
+            exit_code=0, check=_status_is("done")),
+    Hostile("output", "SIGTERM during training: checkpoint, status interrupted, exit 143", _sigterm_train,
+            exit_code=143, check=_terminated_line),
+    # symbolic link loops, the root, long paths, file modes
+    Hostile("output", "train --out a symbolic link loop", lambda f: _train(f, _loop(f)), ("loop",)),
+    Hostile("output", "report --out a symbolic link loop", lambda f: _report(_loop(f)), ("loop",)),
+    Hostile("output", "stress --out a symbolic link loop",
+            lambda f: ["stress", "--component", "hostile:none", "--out", str(_loop(f))], ("loop",)),
+    Hostile("output", "report --out / names no lock of its own", lambda f: _report(Path("/")), ("/: refused", "root"),
+            check=_no_lock_named),
+    Hostile("output", "train --out a 10,000-character path", lambda f: _train(f, _long_path(f)),
+            ("ddd...ddd", "File name too long")),
+    Hostile("output", "eval of a 10,000-character run path", lambda f: ["eval", str(_long_path(f))],
+            ("ddd...ddd", "File name too long")),
+    Hostile("output", "report files get a normal mode (umask), not 0600", lambda f: _report(f / "P"), exit_code=0,
+            check=_report_mode),
     Hostile("output", "points --force keeps other files in sparse/0", _points_foreign, exit_code=0,
             check=_checks(_kept("scene/sparse/0/notes.txt", "my notes"),
                           lambda f, c, e: None if (f / "scene/sparse/points_provenance.json").is_file()
