@@ -6,8 +6,9 @@ repository (results/cpu), so a run can be spread over sessions and every number 
 
 `config` is the run's resolved config.json (results.json's own copy of it is left out of `results`:
 it is the same object), `cell` the grid cell (method, seed, scene spec, axes), `provenance` the
-commit, machine, versions, date and wall times. No model file: a cell is a few tens of kB, and the
-parts most cells share word for word are kept once under STORE/_shared (gsbench.grids.store_format).
+commit, machine, versions, date and wall times. No model file: a cell is about 11 kB (its per-view
+values one packed block), and the parts most cells share word for word are kept once under
+STORE/_shared (gsbench.grids.store_format).
 
 Why here (floor 3): publishing re-plans the grids (gsbench.grids.planning) and checks each run
 folder against its plan; `gsbench claims` materialises published cells back into run folders.
@@ -26,22 +27,23 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Optional
 
 from gsbench import rundir
+from gsbench.collect import number_problem
 from gsbench.config import canonical, flatten, short_repr
 from gsbench.config import run_id as make_run_id
 from gsbench.datasets import load_scene
-from gsbench.errors import InputError
-from gsbench.grids.claims_plan import CLAIM_GRIDS, CONTROL_GRIDS, plan_grids
+from gsbench.errors import InputError, shorten
+from gsbench.grids.claims_plan import plan_grids, plan_names
 from gsbench.grids.grid_file import Grid, load_grid
 from gsbench.grids.liveness import cell_state
 from gsbench.grids.planning import PlannedCell, cell_config, plan
 from gsbench.grids.store_format import (
     STORE_VERSION,
     cell_files,
+    check_numbers,
     read_record,
     record_text,
-    remove_unused_parts,
-    write_record,
 )
+from gsbench.grids.store_write import StoreWriter
 from gsbench.methods.registry import resolve_for_scene
 from gsbench.metric_table import TIMING_NAMES
 from gsbench.numerics import NUMERICS_VERSION
@@ -61,14 +63,15 @@ def plan_for(names: Optional[Iterable[str]] = None, quick: bool = False) -> list
     if not names:
         return plan_grids(quick=quick)
     out = []
+    known = plan_names()
     for name in names:
-        if name in CLAIM_GRIDS + CONTROL_GRIDS:
+        if name in known:
             out += plan_grids(quick=quick, names=(name,))
         elif Path(name).suffix in (".yaml", ".yml") and Path(name).is_file():
             out.append(load_grid(name))
         else:
             raise InputError(f"--grids {short_repr(name, 60)}: neither a grid of the claims plan "
-                             f"({', '.join(CLAIM_GRIDS + CONTROL_GRIDS)}) nor a grid file")
+                             f"({', '.join(known)}) nor a grid file")
     return out
 
 
@@ -108,15 +111,15 @@ class Published:
 def _check_record(rec: Any, path: Path) -> None:
     """The shape every reader relies on, as an InputError naming the file."""
     if not isinstance(rec, dict):
-        raise InputError(f"{path}: a published cell must hold a JSON object")
+        raise InputError(f"{shorten(path)}: a published cell must hold a JSON object")
     missing = [k for k in RECORD_KEYS if k not in rec]
     if missing:
-        raise InputError(f"{path}: not a published cell (missing {', '.join(missing)})")
+        raise InputError(f"{shorten(path)}: not a published cell (missing {', '.join(missing)})")
     for k in ("cell", "config", "results", "train_summary", "provenance"):
         if not isinstance(rec[k], dict):
-            raise InputError(f"{path}: '{k}' must be an object")
+            raise InputError(f"{shorten(path)}: '{k}' must be an object")
     if path.stem != rec["run_id"] or path.parent.name != rec["grid"]:
-        raise InputError(f"{path}: holds cell {short_repr(rec['run_id'])} of grid {short_repr(rec['grid'])}; "
+        raise InputError(f"{shorten(path)}: holds cell {short_repr(rec['run_id'])} of grid {short_repr(rec['grid'])}; "
                          "a cell's file is STORE/<grid>/<run_id>.json")
 
 
@@ -124,7 +127,7 @@ def read_store(store: Path) -> list[Published]:
     """Every cell of the store, sorted by grid and run id; an empty store gives []."""
     store = Path(store)
     if not store.is_dir():
-        raise InputError(f"{store}: results store not found (a folder of <grid>/<run_id>.json files)")
+        raise InputError(f"{shorten(store)}: results store not found (a folder of <grid>/<run_id>.json files)")
     out = []
     for p in cell_files(store):
         rec = read_record(p)
@@ -207,7 +210,9 @@ def compare_metrics(published: dict, now: dict, rtol: float = 0.0, atol: float =
         if m in TIMING_METRICS:
             continue
         a, b = published.get(m), now.get(m)
-        if a is None or b is None:
+        if number_problem(a) or number_problem(b):
+            ok = False                          # not a number: never equal (readers refuse it first)
+        elif a is None or b is None:
             ok = a is None and b is None
         else:
             fa, fb = float(a), float(b)
@@ -334,6 +339,11 @@ def _collect_records(runs_dir: Path, grids: list[Grid], report: PublishReport) -
                 report.not_finished += 1
                 continue
             rec, why = _cell_record(g, pc, results, scenes)
+            try:
+                if rec is not None:
+                    check_numbers(rec, res_path)
+            except InputError as e:
+                rec, why = None, str(e)
             if rec is None:
                 report.refused.append((str(pc.run_dir), why))
             else:
@@ -342,23 +352,27 @@ def _collect_records(runs_dir: Path, grids: list[Grid], report: PublishReport) -
     return records
 
 
-def publish(runs_dir: Path, store: Path, grids: list[Grid]) -> PublishReport:
-    """Add every finished cell of the plan in RUNS to the store. All or nothing: when any cell is
-    refused (not the plan's config, another numerics version, other numbers than the published
-    cell of the same run id), nothing is written. Each file is written atomically."""
-    runs_dir, store = Path(runs_dir), Path(store)
-    if not runs_dir.is_dir():
-        raise InputError(f"{runs_dir}: runs folder not found")
-    report = PublishReport()
-    records = _collect_records(runs_dir, grids, report)
-    if not records and not report.refused:
-        raise InputError(f"{runs_dir}: no finished cell of the plan ({report.not_finished} unfinished); is it a "
-                         "`gsbench claims --out` folder? (--quick or --grids choose another plan)")
+def read_store_to_write(store: Path) -> dict[Path, Published]:
+    """Every cell of a store about to be written, read whole (parts, numbers) under its writer lock: a
+    corrupt cell, even one the write does not touch, stops the write before anything is written."""
+    if not Path(store).exists():
+        return {}
+    try:
+        return {c.path: c for c in read_store(store)}
+    except InputError as e:
+        raise InputError(f"{e}; nothing was written") from None
+
+
+def _compare_with_store(records: list[dict], store: Path, old_cells: dict[Path, Published],
+                        runs_dir: Path, report: PublishReport) -> list[dict]:
+    """The records to write: new cells, and cells of an older numerics version (replaced); a cell
+    published with other numbers at today's numerics version is refused."""
     todo = []
     for rec in records:
         path = record_path(store, rec["grid"], rec["run_id"])
-        old = read_record(path) if path.exists() else None
-        if isinstance(old, dict) and old.get("numerics_version") == NUMERICS_VERSION:
+        found = old_cells.get(path)
+        old = found.record if found is not None else None
+        if old is not None and old.get("numerics_version") == NUMERICS_VERSION:
             bad = [r.metric for r in compare_metrics((old.get("results") or {}).get("metrics") or {},
                                                      rec["results"].get("metrics") or {}) if not r.ok]
             if bad:
@@ -369,14 +383,31 @@ def publish(runs_dir: Path, store: Path, grids: list[Grid]) -> PublishReport:
                 report.unchanged.append(rec["run_id"])
             continue
         (report.replaced if old is not None else report.written).append(path)
-        todo.append((path, rec))
-    if report.refused:
-        report.written, report.replaced = [], []
-        return report
-    store.mkdir(parents=True, exist_ok=True)
-    for path, rec in todo:
-        write_record(store, path, rec)
-    remove_unused_parts(store)
+        todo.append(rec)
+    return todo
+
+
+def publish(runs_dir: Path, store: Path, grids: list[Grid]) -> PublishReport:
+    """Add every finished cell of the plan in RUNS to the store. All or nothing: when any cell is
+    refused (not the plan's config, another numerics version, other numbers than the published
+    cell of the same run id), or any cell of the store cannot be read, nothing is written; else the
+    new cells, their parts and the prune change the store in one step (gsbench.grids.store_write),
+    under the store's writer lock."""
+    runs_dir, store = Path(runs_dir), Path(store)
+    if not runs_dir.is_dir():
+        raise InputError(f"{shorten(runs_dir)}: runs folder not found")
+    report = PublishReport()
+    records = _collect_records(runs_dir, grids, report)
+    if not records and not report.refused:
+        raise InputError(f"{shorten(runs_dir)}: no finished cell of the plan ({report.not_finished} unfinished); is "
+                         "it a `gsbench claims --out` folder? (--quick or --grids choose another plan)")
+    with StoreWriter(store, "gsbench publish") as writer:
+        todo = _compare_with_store(records, store, read_store_to_write(store), runs_dir, report)
+        if report.refused:
+            report.written, report.replaced = [], []
+            return report
+        if todo:
+            writer.commit(todo)
     return report
 
 
@@ -407,7 +438,7 @@ def reuse_published(grid: Grid, runs_dir: Path, store: Path, log: Callable[[str]
     it. A run folder already there is left alone (done, or a run of this cell in progress)."""
     runs_dir, store = Path(runs_dir), Path(store)
     if not store.is_dir():
-        raise InputError(f"{store}: results store not found (a folder of <grid>/<run_id>.json files)")
+        raise InputError(f"{shorten(store)}: results store not found (a folder of <grid>/<run_id>.json files)")
     if not (store / grid.name).is_dir():
         return 0
     reused, kept = 0, 0

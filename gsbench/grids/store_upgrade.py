@@ -24,10 +24,12 @@ from gsbench.collect import upgraded_results
 from gsbench.config import canonical, upgrade_config, upgrade_key
 from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.environment import git_state
+from gsbench.errors import InputError, shorten
 from gsbench.grids.grid_file import Grid
 from gsbench.grids.planning import PlannedCell, plan
-from gsbench.grids.store import Published, first_difference, read_store, record_path
-from gsbench.grids.store_format import STORE_VERSION, record_text, remove_unused_parts, write_record
+from gsbench.grids.store import Published, first_difference, read_store_to_write
+from gsbench.grids.store_format import STORE_VERSION, record_text
+from gsbench.grids.store_write import StoreWriter
 from gsbench.methods.registry import resolve_for_scene
 
 
@@ -78,19 +80,16 @@ def _upgraded_record(c: Published, pc: PlannedCell, scenes: dict, sha: str) -> t
     return json.loads(record_text(new)), ""
 
 
-def upgrade_store(store: Path, grids: list[Grid]) -> UpgradeReport:
-    """Rewrite every published cell whose config is in an older layout (module docstring); the scenes of
+def _plan_upgrades(cells: list[Published], grids: list[Grid], report: UpgradeReport, sha: str
+                   ) -> list[tuple[Published, dict]]:
+    """(cell, its record to write) of every cell to rewrite; refusals go to the report. The scenes of
     the plan are generated in a temporary folder to check fingerprints and resolve configs."""
-    store = Path(store)
-    report = UpgradeReport()
     by_name = {g.name: g for g in grids}
-    head, dirty = git_state()
-    sha = f"{head}{' (uncommitted changes)' if dirty else ''}" if head else "unknown"
     todo: list[tuple[Published, dict]] = []
     with tempfile.TemporaryDirectory(prefix="gsbench-upgrade-") as tmp:
         plans: dict[str, list[PlannedCell]] = {}
         scenes: dict = {}
-        for c in read_store(store):
+        for c in cells:
             if upgrade_config(c.record["config"]) is c.record["config"]:
                 report.current += 1
                 if c.record.get("store_version") != STORE_VERSION:
@@ -112,17 +111,34 @@ def upgrade_store(store: Path, grids: list[Grid]) -> UpgradeReport:
                 report.refused.append((str(c.path), why))
             else:
                 todo.append((c, new))
-    if report.refused:
-        return report
-    for c, new in todo:
-        write_record(store, record_path(store, new["grid"], new["run_id"]), new)
-        if new is c.record:
-            report.reformatted.append(str(c.path))
-            continue
-        if new["run_id"] != c.run_id:
-            c.path.unlink()
-        report.upgraded.append((c.grid, c.run_id, new["run_id"]))
-    remove_unused_parts(store)
+    return todo
+
+
+def upgrade_store(store: Path, grids: list[Grid]) -> UpgradeReport:
+    """Rewrite every published cell whose config is in an older layout, or that an older store format
+    wrote (module docstring): under the store's writer lock, every cell read first, all of it in one
+    step or nothing (gsbench.grids.store_write)."""
+    store = Path(store)
+    if not store.is_dir():
+        raise InputError(f"{shorten(store)}: results store not found (a folder of <grid>/<run_id>.json files)")
+    report = UpgradeReport()
+    head, dirty = git_state()
+    sha = f"{head}{' (uncommitted changes)' if dirty else ''}" if head else "unknown"
+    with StoreWriter(store, "gsbench publish --upgrade") as writer:
+        cells = list(read_store_to_write(store).values())
+        todo = _plan_upgrades(cells, grids, report, sha)
+        if report.refused:
+            return report
+        removes = []
+        for c, new in todo:
+            if new is c.record:
+                report.reformatted.append(str(c.path))
+                continue
+            if new["run_id"] != c.run_id:
+                removes.append((c.grid, c.run_id))
+            report.upgraded.append((c.grid, c.run_id, new["run_id"]))
+        if todo:
+            writer.commit([new for _, new in todo], removes)
     return report
 
 
