@@ -35,7 +35,7 @@ CONFIG_DIR = Path(__file__).parent / "configs"
 NON_RESULT_KEYS = (("priors", "cache_dir"), ("train", "data_on"))
 # keys added after run folders were stored: left out of the hash while they hold their null default,
 # so the run ids (and config keys) of configs that do not set them stay what they were
-NULL_DEFAULT_KEYS = (("train", "views"),)
+NULL_DEFAULT_KEYS = (("train", "views"), ("gaussiands", "sem_geometry"))
 _NO_DEFAULT = object()
 
 

@@ -92,7 +92,7 @@ def list_of(item: Rule, shortest: int, longest: int) -> Rule:
 
 _PLURALS = {"float": "numbers", "int": "whole numbers", "str": "strings"}   # a list's elements, in words
 BACKENDS = ("auto", "torch", "cpu", "gsplat")
-DEPTH_PROVIDERS = ("gt", "sparse", "sfm", "depth-anything", "none")
+DEPTH_PROVIDERS = ("gt", "sparse", "sfm", "depth-anything", "auto", "none")
 MASK_PROVIDERS = ("simulated", "sam2", "gt")
 FEATURE_PROVIDERS = ("text-aligned", "openclip")
 PROPAGATORS = ("flow", "reproject")

@@ -20,10 +20,15 @@ def switch_off(on: dict, keys: tuple[str, ...], section: str, why: str, drop: Dr
 def depth_source(cfg: dict, scene) -> tuple[bool, str]:
     """Can the scene feed the configured depth provider? (ok, reason when not)."""
     prov = setting(cfg, "priors.depth.provider")
+    if prov == "auto":
+        from gsbench.priors.depth import auto_depth_provider  # lazy: start-up (listing methods loads no priors)
+        prov, why = auto_depth_provider(setting(cfg, "priors.depth"), scene)
+        if prov is None:
+            return False, why
     if prov in (None, "none"):
         return False, "priors.depth.provider=none"
     if prov == "gt" and not scene.has_depth:
-        hint = " (priors.depth.provider=sfm builds one from its sparse points)" if scene.has_points else ""
+        hint = " (priors.depth.provider=auto or sfm builds one from its sparse points)" if scene.has_points else ""
         return False, f"priors.depth.provider=gt but the scene has no GT depth{hint}"
     if prov in ("sparse", "sfm") and not scene.has_points:
         return False, f"priors.depth.provider={prov} but the scene has no sparse points"

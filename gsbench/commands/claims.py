@@ -41,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    known = claims_plan.CLAIM_GRIDS + claims_plan.CONTROL_GRIDS
+    known = claims_plan.plan_names()
     names = tuple(args.grids) if args.grids else None
     unknown = [n for n in names or () if n not in known]
     if unknown:

@@ -1,24 +1,30 @@
-"""The plan of `gsbench claims`: every shipped grid the paper-claims table and its positive controls
-read, and the --quick variant of the same plan (tiny scale, two seeds) for CI and smoke checks.
+"""The plan of `gsbench claims` as grids: every grid the paper-claims table and its positive controls
+read (each study's `claims_grids` in methods/gaussiands/study_table.py, the one home of studies, claims,
+controls and regimes), and the --quick variant of the same plan (tiny scale, two seeds) for CI and smoke
+checks.
 
 Why here: the claims command runs these grids with the ordinary grid machinery (run_grid, the
-executors, resume), so the plan is a list of grid names plus, for --quick, the overrides that
-shrink every cell; the report side (reports/claims_table.py) only reads the studies these grids record.
+executors, resume), so what this module adds to the study table is loading the grids and, for --quick,
+the overrides that shrink every cell.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 
 from gsbench.grids.grid_file import Grid, SceneSpec, load_grid
+from gsbench.methods.gaussiands import study_table
+from gsbench.methods.gaussiands.study_table import REGIMES, DeclaredRegime, Regime  # noqa: F401  (the plan's regimes)
 
-# the studies of the paper-claims table, then the positive controls (docs/grids.md)
-CLAIM_GRIDS: tuple[str, ...] = (
-    "ordering-cpu", "depth_formulation-cpu", "loss_subsets-cpu", "lambda_grid-cpu", "latent_dim-cpu",
-    "depth_noise-cpu",
-)
-CONTROL_GRIDS: tuple[str, ...] = (
-    "control_depth-cpu", "control_depth_noise-cpu", "control_ds-cpu", "control_latent-cpu", "control_sem-cpu",
-)
+# the grids of the paper-claims table, then the positive controls, as the study table declares them
+# (methods/gaussiands/study_table.py); plan_grids reads the table again when it is called
+CLAIM_GRIDS: tuple[str, ...] = study_table.claim_grids()
+CONTROL_GRIDS: tuple[str, ...] = study_table.control_grids()
+
+
+def plan_names() -> tuple[str, ...]:
+    """The grids of the claims plan in running order: each study's claims_grids, paper studies then controls."""
+    return study_table.claim_grids() + study_table.control_grids()
+
 
 QUICK_SEEDS = [0, 1]
 QUICK_RESOLUTION = [48, 36]   # synthetic scenes are generated this small under --quick
@@ -40,7 +46,7 @@ def plan_grids(quick: bool = False, names: tuple[str, ...] | None = None) -> lis
     """The grids the claims need, in running order; with `quick`, each shrunk to tiny scale and
     two seeds (the same cells otherwise, so the quick run exercises every study and control)."""
     out = []
-    for name in names if names is not None else CLAIM_GRIDS + CONTROL_GRIDS:
+    for name in names if names is not None else plan_names():
         if not quick:
             out.append(load_grid(name))
             continue

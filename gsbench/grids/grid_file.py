@@ -25,14 +25,21 @@ from gsbench.config import (
 )
 from gsbench.datasets import synthetic
 from gsbench.errors import InputError
-from gsbench.methods.gaussiands.study_table import STUDIES as STUDY_TABLE
+from gsbench.methods.gaussiands import study_table
 
 GRID_DIR = Path(__file__).parent
 
 # Study names and the axis keys they vary: the one studies table, methods/gaussiands/study_table.py.
 # A grid of a paper study may vary only that study's axes; a control or smoke study (e.g. tiny-test)
 # is a name, not a contract, so its grids may vary anything.
-STUDIES: dict[str, tuple[str, ...]] = {name: st.axes for name, st in STUDY_TABLE.items() if st.kind == "paper"}
+
+
+def study_axes() -> dict[str, tuple[str, ...]]:
+    """The paper studies' axes, read from the study table when called (a study declared later included)."""
+    return {name: st.axes for name, st in study_table.studies().items() if st.kind == "paper"}
+
+
+STUDIES: dict[str, tuple[str, ...]] = study_axes()
 TOP_KEYS = {"study", "description", "base", "scenes", "seeds", "later_seeds", "mode", "axes", "sweeps", "extra_cells"}
 BASE_KEYS = {"method", "preset", "set"}
 
@@ -307,8 +314,9 @@ def parse_grid(raw: dict, where: str = "<grid>", path: Optional[Path] = None,
             c[k] = check_value(k, v, leaves, f"{where}: extra_cells[{i}]")
             if k not in axis_keys:
                 axis_keys.append(k)
-    if study in STUDIES:
-        allowed = set(STUDIES[study])
+    axes_of = study_axes()
+    if study in axes_of:
+        allowed = set(axes_of[study])
         stray = [k for k in axis_keys if k not in allowed]
         if stray:
             raise InputError(f"{where}: study {study!r} varies {sorted(allowed)}; axis keys {stray} belong to no study "

@@ -25,6 +25,10 @@
 - ``depth-anything``: Depth Anything through transformers (AutoModelForDepthEstimation and its
   image processor) from a local model folder, never downloading. It sees the full-resolution
   image; its relative-disparity output is resized bicubically to `size`. Kind ``disparity``.
+- ``auto``: the first of these the scene can feed: ``gt`` where it has GT depth (the synthetic
+  scenes: exactly what ``gt`` computes there, same id and cache entry), else ``sfm`` where it has
+  sparse points, else ``depth-anything`` where ``model_path`` names local weights, else no prior
+  (`auto_depth_provider`). The recorded provider reads ``auto -> <id>``.
 - ``none``: no prior.
 
 Noise (the depth-noise study): `apply_depth_noise` applies
@@ -203,6 +207,31 @@ def working_size_of(depth_cfg: Mapping) -> int:
     return int(check_key(key, depth_cfg["working_size"] if "working_size" in depth_cfg else setting({}, key)))
 
 
+def auto_depth_provider(depth_cfg: Mapping, scene) -> tuple[str | None, str]:
+    """What ``auto`` resolves to on `scene`: (provider, '') or (None, why no prior). GT depth first (the
+    synthetic scenes), then the sparse points (`sfm`), then a depth model from local weights
+    (`depth-anything`, only when `model_path` is set: nothing is downloaded)."""
+    if scene.has_depth:
+        return "gt", ""
+    if scene.has_points:
+        return "sfm", ""
+    if depth_cfg.get("model_path"):
+        return "depth-anything", ""
+    return None, ("priors.depth.provider=auto: the scene has no GT depth and no sparse points (`gsbench points "
+                  "SCENE` triangulates them), and priors.depth.model_path names no depth model")
+
+
+def resolved_depth_cfg(depth_cfg: Mapping, scene) -> tuple[dict, str]:
+    """`depth_cfg` with ``auto`` replaced by the provider it resolves to on `scene` (``none`` when there
+    is none, with the reason); any other provider as it is, with ''."""
+    out = dict(depth_cfg)
+    if out.get("provider") != "auto":
+        return out, ""
+    prov, why = auto_depth_provider(out, scene)
+    out["provider"] = prov or "none"
+    return out, why
+
+
 def depth_provider_id(depth_cfg: Mapping) -> str | None:
     """The id recorded in results (before noise); None for ``none``. Real ids need the model."""
     p = depth_cfg.get("provider", "gt")
@@ -223,7 +252,9 @@ def depth_provider_id(depth_cfg: Mapping) -> str | None:
 def compute_depth(scene, depth_cfg: Mapping, view_ids: Sequence[int], size: tuple[int, int],
                   seed: int = 0, progress: bool = False, device: str | None = None) -> dict[int, DepthPrior]:
     """Clean depth priors for `view_ids` at `size` (no noise; see `apply_depth_noise`); a depth model
-    runs on `device` (the run's training device; None = CUDA when available, else the CPU)."""
+    runs on `device` (the run's training device; None = CUDA when available, else the CPU). ``auto`` is
+    first resolved for the scene (`resolved_depth_cfg`)."""
+    depth_cfg, _ = resolved_depth_cfg(depth_cfg, scene)
     p = depth_cfg.get("provider", "gt")
     pid = depth_provider_id(depth_cfg)
     out: dict[int, DepthPrior] = {}

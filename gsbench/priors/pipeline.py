@@ -260,10 +260,13 @@ def _depth_save(depth: dict[int, D.DepthPrior], views: list[int]) -> tuple[dict,
 def _depth_stage(run: _Run, cfg: Mapping) -> dict[int, D.DepthPrior] | None:
     """The depth prior (cached), with the depth-noise study's noise applied after the cache; None when
     `priors.depth.provider` is none."""
-    dcfg = dict(cfg.get("depth", {}) or {})
+    asked = dict(cfg.get("depth", {}) or {})
+    # `auto` computes (and caches) exactly what its resolved provider does; only the record says auto
+    dcfg, why = D.resolved_depth_cfg(asked, run.scene)
+    auto = "auto -> " if asked.get("provider") == "auto" else ""
     pid = D.depth_provider_id(dcfg)
     if pid is None:
-        run.skipped["depth"] = "priors.depth.provider=none"
+        run.skipped["depth"] = why or "priors.depth.provider=none"
         return None
     scene, views, seed = run.scene, run.views, run.seed
     params = {k: v for k, v in dcfg.items() if k != "noise"}
@@ -280,7 +283,7 @@ def _depth_stage(run: _Run, cfg: Mapping) -> dict[int, D.DepthPrior] | None:
         lambda: D.compute_depth(scene, dcfg, views, run.size, seed, run.progress, device=run.device),
         lambda d: _depth_save(d, views))
     depth = D.apply_depth_noise(depth, dcfg.get("noise"), seed)
-    run.providers["depth"] = depth[views[0]].provider
+    run.providers["depth"] = auto + depth[views[0]].provider
     return depth
 
 

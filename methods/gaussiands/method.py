@@ -9,6 +9,8 @@ L_depth and L_tv see the rendered depth divided by its own (detached) alpha-weig
 Inputs come from gsbench.priors: pose-aware pseudo-video order (priors.ordering), propagated masks,
 512-d mask features (compressed by the frozen autoencoder to d = semantic.latent_dim) and the depth
 prior. Terms the resolved config switched off (gaussiands.losses.*, semantic.loss) are neither computed nor fed.
+`gaussiands.sem_geometry` (null = joint) says whether L_sem and L_ds also move the geometry and the densification
+statistic (docs/methods.md, "Where GaussianDS's PSNR goes at small d").
 """
 from __future__ import annotations
 
@@ -20,9 +22,11 @@ import numpy as np
 import torch
 
 from gsbench.config import setting
+from gsbench.gaussians import GaussianField
 from gsbench.methods.base import Method, Phases, fit_priors
 from gsbench.methods.gaussiands.spec import budget
 from gsbench.methods.registry import uses
+from gsbench.render import render
 from gsbench.train.initial_field import scene_init
 from gsbench.train.losses import (
     EDGE_FLOOR,
@@ -141,6 +145,7 @@ def gaussiands_loss(config: dict, dprior: dict, targets, has_any: dict[int, bool
     min_valid = int(setting(config, "gaussiands.min_valid_pixels"))
     tv_eps = float(setting(config, "gaussiands.tv_eps"))
     ds_average = str(setting(config, "gaussiands.ds_average"))
+    sem_geometry = setting(config, "gaussiands.sem_geometry") or "joint"
 
     def loss_fn(ctx: StepContext) -> LossResult:
         # every value stays on the device: no host synchronisation per step (the trainer reads
@@ -162,17 +167,37 @@ def gaussiands_loss(config: dict, dprior: dict, targets, has_any: dict[int, bool
             res.add("tv", lam["tv"], tv_loss(dn, tv_eps))
         if targets is not None and out.features is not None:
             S, has = targets.latents[vid], targets.has_target[vid]
+            feats = out.features
+            if sem_geometry != "joint" and has_any[vid] and (on["sem"] or (on["ds"] and vid in edges)):
+                feats = latent_render(ctx, detach_geometry=sem_geometry == "detached")
             if on["sem"]:
                 if not has_any[vid]:
                     res.skipped["sem"] = 1
                 else:
-                    res.add("sem", lam["sem"], sem_loss(out.features, S, has))
+                    res.add("sem", lam["sem"], sem_loss(feats, S, has))
             if on["ds"] and vid in edges:
                 if not has_any[vid]:
                     res.skipped["ds"] = 1
                 else:
-                    res.add("ds", lam["ds"], ds_loss(out.features, S, has, edges[vid], ds_average))
+                    res.add("ds", lam["ds"], ds_loss(feats, S, has, edges[vid], ds_average))
         res.terms["total"] = res.total.detach()
         return res
 
     return loss_fn
+
+
+def latent_render(ctx: StepContext, detach_geometry: bool) -> torch.Tensor:
+    """The step's view rendered a second time for the semantic terms (`gaussiands.sem_geometry` other than
+    joint): its screen positions are not the ones the densification statistic reads, so L_sem and L_ds no
+    longer drive densification; with `detach_geometry` their gradient reaches the latents only (positions,
+    scales, rotations and opacities are constants here). The colours are constants either way."""
+    p, backend = ctx.params, ctx.trainer.backend
+    keep = (lambda t: t.detach()) if detach_geometry else (lambda t: t)
+    opacity = keep(p["opacity_logits"])
+    if detach_geometry and backend == "torch":
+        # the torch rasterizer's checkpointed backward needs its transmittance on the graph: the opacities
+        # enter with a zero-weight link to the parameters (the same values, a gradient of exactly zero)
+        opacity = opacity + 0.0 * p["opacity_logits"]
+    fld = GaussianField(keep(p["means"]), keep(p["log_scales"]), keep(p["quats"]), opacity,
+                        p["colors"].detach(), p["features"])
+    return render(fld, ctx.trainer.views.cameras[ctx.view_id], backend=backend).features

@@ -1,6 +1,6 @@
 """The spec of `gaussiands`, the reference method: registration, its config section (defaults, ranges,
 choices), what the scene must feed, and its budget. The method is methods/gaussiands/method.py; the
-paper's numbers are paper.py beside it. It reads the shared `semantic` section (L_sem on, d, the
+paper's numbers and studies are study_table.py beside it. It reads the shared `semantic` section (L_sem on, d, the
 autoencoder) and its own `gaussiands` section below."""
 from __future__ import annotations
 
@@ -12,6 +12,9 @@ from gsbench.methods.rules import Drop, depth_source, resolve_semantics, switch_
 # the depth-loss forms and L_ds averages gsbench/train/losses.py implements (a test keeps them equal)
 DEPTH_FORMULATIONS = ("none", "raw_l1", "minmax", "scale_shift", "pearson")
 DS_AVERAGES = ("pixels", "edges")
+# where L_sem's and L_ds's gradient may go (docs/methods.md, "Where GaussianDS's PSNR goes at small d"):
+# joint = one render, into the latents, the geometry and the densification statistic (null, the default)
+SEM_GEOMETRY = ("joint", "no_densify", "detached")
 
 # the `gaussiands:` section, with the paper's values
 DEFAULTS = {
@@ -27,6 +30,7 @@ DEFAULTS = {
         "size": None,         # short side (px) Canny runs at when the prior is larger (518: Depth Anything's output);
     },                        # null = the training size
     "min_valid_pixels": 10,
+    "sem_geometry": None,     # null = joint | no_densify | detached: see SEM_GEOMETRY (null: left out of run ids)
 }
 # layout 1 (gsbench up to d113fae) kept d, the autoencoder and L_sem's switch here; twostage read them too
 MOVED = {"gaussiands.latent_dim": "semantic.latent_dim", "gaussiands.autoencoder": "semantic.autoencoder",
@@ -41,6 +45,7 @@ RULES: dict[str, Rule] = {
     "gaussiands.edges.dilate": at_least(0),
     "gaussiands.edges.size": at_least(8, kind="int", integer=True),   # null = Canny at the training size
     "gaussiands.min_valid_pixels": at_least(1),
+    "gaussiands.sem_geometry": one_of(*SEM_GEOMETRY, kind="str"),   # null = joint
 }
 
 
