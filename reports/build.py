@@ -44,6 +44,9 @@ _SECTION_OF = [
     ("ordering", "ordering"), ("depth_formulation", "depth_formulation"), ("loss_subsets", "loss_subsets"),
     ("latent_dim", "latent_dim"), ("lambda_", "lambda_grid"), ("depth_noise", "depth_noise"),
 ]
+# the studies' sections in report order: the paper's layout (_SECTION_OF), then any other paper study as declared
+_STUDY_ORDER = list(dict.fromkeys([sec for _, sec in _SECTION_OF if sec != "main"]
+                                  + [k for k in STUDIES if k != "reconstruction"]))
 _SECTION_TITLES = {
     "main": "Main results (reconstruction and segmentation)",
     **{k: v for k, v in STUDIES.items() if k != "reconstruction"},
@@ -166,7 +169,7 @@ def _write_report(source: str | Path, out_dir: Path, progress: bool) -> ReportSu
     if block:
         section("pictures").blocks.append(block)
         summary.pictures = pictures
-    order = ["main", "pictures", "budgets", "claims"] + [k for k in STUDIES if k != "reconstruction"]
+    order = ["main", "pictures", "budgets", "claims"] + _STUDY_ORDER
     ordered = [sections[k] for k in order if k in sections] + [s for k, s in sections.items() if k not in order]
     links = [("tables.md", "tables (Markdown)"), ("tables.tex", "tables (LaTeX)"),
              (summary.collected.name, f"collected results ({summary.collected.suffix[1:]})")]
@@ -255,8 +258,8 @@ def _absence_notes(res: Results, tables: list[Table], studies: Any, main_ids: li
     absent = []
     if not main_ids:
         absent.append("main results (standalone / reconstruction runs)")
-    for st in STUDIES:
-        if st != "reconstruction" and st not in studies:
+    for st in _STUDY_ORDER:
+        if st not in studies:
             absent.append(st)
     if absent:
         notes.append("No runs for: " + ", ".join(absent) + " (their tables and plots are left out).")

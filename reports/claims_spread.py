@@ -15,10 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from gsbench.methods.gaussiands.paper import PAPER_CLAIMS, Claim
+from gsbench.methods.gaussiands import study_table
+from gsbench.methods.gaussiands.study_table import Claim
+from gsbench.reports.controls import scene_label
 from gsbench.reports.data import Results
 from gsbench.reports.display import metric_spec
-from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
+from gsbench.reports.studies import _get, scene_protocols
 from gsbench.reports.table import Cell, Column, Row, Table
 
 
@@ -75,7 +77,8 @@ def _study_metrics(claims: list[Claim]) -> list[tuple[str, str]]:
     return out
 
 
-def _row(res: Results, study: str, metric: str, scene: str, protocol: Any) -> Row | None:
+def _row(res: Results, study: str, metric: str, scene: str, protocol: Any,
+         kinds: dict[str, str] | None = None) -> Row | None:
     concrete = res.resolve(metric, protocol)
     if concrete is None:
         return None
@@ -86,19 +89,20 @@ def _row(res: Results, study: str, metric: str, scene: str, protocol: Any) -> Ro
         return None
     size = f"{table.shape[0]} x {table.shape[1]}" + (f" ({left_out} left out)" if left_out else "")
     d = sp.decimals
-    return Row([study, sp.label, f"{scene} ({PROTOCOL_SHORT.get(protocol, protocol)})"],
+    return Row([study, sp.label, scene_label(scene, protocol, kinds)],
                [Cell(text=size), Cell(text=f"{sh.sd_seeds:.{d}f}"), Cell(text=f"{sh.sd_settings:.{d}f}"),
                 Cell(text=f"{100 * sh.seed:.0f} %"), Cell(text=f"{100 * sh.setting:.0f} %"),
                 Cell(text=f"{100 * sh.rest:.0f} %")])
 
 
-def spread_table(res: Results, claims: list[Claim] | None = None) -> list[Table]:
-    """One row per claim study, metric and scene with a complete table of at least 2 settings x 2 seeds."""
+def spread_table(res: Results, claims: list[Claim] | None = None, kinds: dict[str, str] | None = None) -> list[Table]:
+    """One row per claim study, metric and scene with a complete table of at least 2 settings x 2 seeds
+    (`kinds`: scene name -> synthetic / real, for the Scene column)."""
     rows = []
-    for study, metric in _study_metrics(PAPER_CLAIMS if claims is None else claims):
+    for study, metric in _study_metrics(study_table.paper_claims() if claims is None else claims):
         ids = res.run_ids(study=study)
         for scene, protocol in scene_protocols(res, ids) if ids else []:
-            row = _row(res, study, metric, scene, protocol)
+            row = _row(res, study, metric, scene, protocol, kinds)
             if row is not None:
                 rows.append(row)
     if not rows:

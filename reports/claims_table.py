@@ -1,62 +1,88 @@
 """The "paper claims" table: each claim of the paper's ablation section, the paper's number, gsbench's
-measured effect with its 95 % interval, the minimum detectable effect (MDE) at its n, and a verdict
-that follows only from that interval.
+measured effect with its 95 % interval, what the design could detect at its n, the verdict that
+follows from the interval, and the p-value its verdict rests on with its Holm-adjusted value.
 
-Why a data table: the paper's numbers live beside the method (methods/gaussiands/paper.py,
-PAPER_CLAIMS, each with the section and table or figure it comes from), and the verdict rules are
-the same for every row. Interval and
+Why a data table: the paper's numbers live beside the method (methods/gaussiands/study_table.py,
+each claim declared on its study with the section and table or figure it comes from), and the verdict
+rules are the same for every row. Interval and
 paper number are in the same display units (PSNR in dB, IoU in %, r as is):
 - claim with a number P (sized against the paper; "above"/"below" read on the paper's side of zero):
-  reproduced when the interval excludes zero on P's side and reaches P; smaller than claimed when it
-  excludes zero on P's side but lies wholly short of P; not reproduced when it contains zero and lies
-  wholly short of P (the row prints the largest effect still compatible); opposite when it excludes
-  zero on the other side; inconclusive when it contains both zero and P (or has no interval);
+  reproduced when the interval excludes zero on P's side and contains P; larger than claimed when it
+  excludes zero and lies wholly beyond P; smaller than claimed when it excludes zero but lies wholly
+  short of P; not reproduced when it contains zero and lies wholly short of P (the row prints the
+  largest effect still compatible); opposite when it excludes zero on the other side; inconclusive when
+  it contains both zero and P (or has no interval);
 - directional claim without a number: reproduced / opposite when the interval excludes zero on the
   paper's / the other side, inconclusive when it includes zero or has no interval (one seed);
-- robustness claim (the paper says "no real change"): reproduced when the interval lies inside
-  +-margin, opposite when it lies wholly beyond the margin on the harmful side, else inconclusive.
-  The margin is gsbench's own, fixed here before any run, not a number of the paper;
+- robustness claim (the paper says "no real change"): an equivalence test, TOST at 5 % a side against
+  +-margin (reports/claims_tests.py): reproduced when both one-sided tests reject (the 90 % interval lies
+  inside +-margin), opposite when the 90 % interval lies wholly beyond -margin (the harmful side), else
+  inconclusive. The margin is gsbench's own, fixed here before any run, not a number of the paper;
+- lambda claim (a Pearson r in the paper): the within-seed r of the seed fixed-effects fit, sized like a
+  number P, beside the fit's slope (reports/claims_tests.py);
 - not run: the study, or one of the two rows it compares, has no finished run with the metric;
 - not testable: the resolver dropped the setting the claim is about (e.g. no depth prior);
-- blind: any verdict whose interval includes zero (or that has none) while the claim's positive control
-  ran and is not marked, or while the compared row lacked what the mechanism acts on (`Claim.inputs`,
+- blind: any verdict whose interval includes zero (or that has none) while no positive control of the
+  claim is marked in the claim's regime (reports/regimes.py: scene, training views, preset, prior
+  providers; a control with the exact version of the claim's depth prior counts, and is named): "blind:
+  control K unmarked" when one ran there, "blind: no control in this regime" when none did, or none is
+  declared for the claim; or while the compared row lacked what the mechanism acts on (`Claim.inputs`,
   e.g. an empty L_ds edge map). A robustness "reproduced" is included: a study that cannot see the
   mechanism also shows "no change". An interval that excludes zero is never blinded.
+Each row is one claim in one regime, and names the control that guards it there.
+Every row with an interval enters one Holm family (`holm_qualify`): its p-value is that of the
+hypothesis its verdict rejects (zero for reproduced / opposite / inconclusive; the paper's value for not
+reproduced; both, the larger p, for larger / smaller than claimed; the margin for robustness). A verdict
+that rejects something and fails Holm reads "(fails Holm)"; one from a study whose grid got seeds after
+a look at its results reads "(after a second look)".
 The paper's number is compared and printed at the paper's decimals (`Claim.paper_decimals`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from typing import Any
 
-from gsbench.methods.gaussiands.paper import MAX, PAPER_CLAIMS, ROBUST_MARGIN_DB, Claim
-from gsbench.reports.ablations import _covered, run_dropped
-from gsbench.reports.controls import blind_claims, starved
-from gsbench.reports.data import Results, same
-from gsbench.reports.display import metric_spec
-from gsbench.reports.stats import (
-    SEEDS_CAP,
-    Diff,
-    compare,
-    family_note,
-    mde_r,
-    pearson,
-    pearson_interval,
-    runs_for_r,
-    seeds_for_mde,
+from gsbench.methods.gaussiands import study_table
+from gsbench.methods.gaussiands.study_table import (  # noqa: F401  (PAPER_CLAIMS: the shipped ones)
+    MAX,
+    PAPER_CLAIMS,
+    ROBUST_MARGIN_DB,
+    Claim,
+    Regime,
 )
-from gsbench.reports.studies import PROTOCOL_SHORT, _get, scene_protocols
-from gsbench.reports.sweeps import lambda_points
+from gsbench.reports.ablations import _covered, run_dropped
+from gsbench.reports.claims_tests import (
+    TOST_ALPHA,
+    mde_within_r,
+    p_r_against,
+    seeds_for_tost,
+    seeds_for_within_r,
+    tost,
+    tost_power,
+    within_seed,
+)
+from gsbench.reports.controls import Guard, claim_guard, regime_groups, regime_marks, starved
+from gsbench.reports.data import Results, is_null, same
+from gsbench.reports.display import metric_spec
+from gsbench.reports.regimes import declared, regime_label
+from gsbench.reports.stats import ALPHA, SEEDS_CAP, Diff, compare, holm, p_two_sided, seeds_for_mde
+from gsbench.reports.studies import _get
 from gsbench.reports.table import Cell, Column, Row, Table
 from gsbench.train.losses import EDGE_FLOOR
 
 REPRODUCED, OPPOSITE, INCONCLUSIVE, NOT_RUN, NOT_TESTABLE = (
     "reproduced", "opposite", "inconclusive", "not run", "not testable")
-SMALLER, NOT_REPRODUCED, BLIND = "smaller than claimed", "not reproduced", "blind"
+SMALLER, LARGER, NOT_REPRODUCED, BLIND = "smaller than claimed", "larger than claimed", "not reproduced", "blind"
+FAILS_HOLM, SECOND_LOOK = "fails Holm", "after a second look"
+# the verdicts that reject a hypothesis (zero, the paper's value or the margin): the ones Holm and a
+# second look can qualify
+REJECTING = (REPRODUCED, OPPOSITE, LARGER, SMALLER, NOT_REPRODUCED)
 CLAIM_COLUMNS = [Column("paper", "Paper", "Paper"),
                  Column("measured", "gsbench [95 % CI] (n)", "gsbench [95\\% CI] (n)"),
                  Column("mde", "MDE", "MDE"), Column("verdict", "Verdict", "Verdict"),
-                 Column("seeds", "Seeds for the MDE", "Seeds for the MDE")]
+                 Column("seeds", "Seeds for the MDE", "Seeds for the MDE"),
+                 Column("p", "p (Holm p)", "p (Holm p)")]
 
 
 def paper_text(claim: Claim) -> str:
@@ -67,15 +93,16 @@ def paper_text(claim: Claim) -> str:
 
 def not_run_row(claim: Claim) -> Row:
     """The row of a claim whose study has no run."""
-    cells = [paper_text(claim), "study not run", "–", NOT_RUN, "–"]
-    return Row([claim.text, claim.source, "–"], [Cell(text=t) for t in cells])
+    cells = [paper_text(claim), "study not run", "–", NOT_RUN, "–", "–"]
+    return Row([claim.text, claim.source, "–", "–"], [Cell(text=t) for t in cells])
 
 
 def verdict(direction: int, lo: float | None, hi: float | None, paper: float | None = None,
             margin: float = ROBUST_MARGIN_DB, decimals: int | None = None) -> str:
     """The verdict of one claim from the interval [lo, hi] of (row - reference), or of r; with the
     paper's number `paper` the verdict is sized against it (module docstring), at the paper's precision
-    when `decimals` (the paper's) is given: an interval that reaches +2.62 at two decimals reaches +2.62."""
+    when `decimals` (the paper's) is given: an interval that reaches +2.62 at two decimals reaches +2.62.
+    For a robustness claim (direction 0) [lo, hi] is the equivalence test's 90 % interval."""
     if lo is None or hi is None:
         return INCONCLUSIVE
     if direction == 0:  # robustness: harmful side is negative (a drop)
@@ -92,21 +119,49 @@ def verdict(direction: int, lo: float | None, hi: float | None, paper: float | N
         return OPPOSITE
     if paper is None:
         return REPRODUCED if a > 0.0 else INCONCLUSIVE
-    far = b if decimals is None else round(b, decimals)
+    near, far = (a, b) if decimals is None else (round(a, decimals), round(b, decimals))
     short = far < abs(paper)  # the whole interval lies short of the paper's value
     if a > 0.0:
-        return SMALLER if short else REPRODUCED
+        if short:
+            return SMALLER
+        return LARGER if near > abs(paper) else REPRODUCED
     return NOT_REPRODUCED if short else INCONCLUSIVE
 
 
 def verdict_text(v: str, direction: int, lo: float | None, hi: float | None, paper: float | None,
                  decimals: int) -> str:
-    """The verdict with, when the interval lies short of the paper's number, the largest effect on the
-    paper's side it still allows ("at most +0.14, paper +37.30"), both at `decimals`, the paper's."""
-    if v not in (SMALLER, NOT_REPRODUCED) or lo is None or hi is None or paper is None:
+    """The verdict with, when the interval lies short of (beyond) the paper's number, the largest
+    (smallest) effect on the paper's side it still allows ("at most +0.14, paper +37.30"), both at
+    `decimals`, the paper's."""
+    if v not in (SMALLER, NOT_REPRODUCED, LARGER) or lo is None or hi is None or paper is None:
         return v
-    bound = f"at most {hi:+.{decimals}f}" if direction > 0 else f"at least {lo:+.{decimals}f}"
+    if v == LARGER:
+        bound = f"at least {lo:+.{decimals}f}" if direction > 0 else f"at most {hi:+.{decimals}f}"
+    else:
+        bound = f"at most {hi:+.{decimals}f}" if direction > 0 else f"at least {lo:+.{decimals}f}"
     return f"{v}: {bound}, paper {paper:+.{decimals}f}"
+
+
+def qualified(text: str, notes: list[str]) -> str:
+    """'opposite' + ['fails Holm'] -> 'opposite (fails Holm)'; the qualification goes before the ':'
+    detail ('not reproduced (after a second look): at most ...')."""
+    if not notes:
+        return text
+    head, sep, rest = text.partition(":")
+    return f"{head} ({'; '.join(notes)}){sep}{rest}"
+
+
+def rests_on(v: str, direction: int) -> tuple[str, ...]:
+    """The hypotheses a verdict rejects (module docstring): 'zero' (no effect), 'paper' (the paper's
+    value), 'tost' (a difference of at least the margin), 'harm' (no drop beyond the margin)."""
+    if direction == 0:
+        return {REPRODUCED: ("tost",), OPPOSITE: ("harm",)}.get(v, ())
+    return {REPRODUCED: ("zero",), OPPOSITE: ("zero",), LARGER: ("zero", "paper"), SMALLER: ("zero", "paper"),
+            NOT_REPRODUCED: ("paper",)}.get(v, ())
+
+
+def _tests(**p: float | None) -> dict[str, float]:
+    return {k: v for k, v in p.items() if v is not None and math.isfinite(v)}
 
 
 def _select(res: Results, ids: list[str], sel: dict) -> list[str]:
@@ -135,15 +190,20 @@ def _dropped_reason(res: Results, rids: list[str], axes: list[str]) -> str | Non
 
 @dataclass
 class Measured:
-    """One row's measurement: the effect text, the verdict (with its bound), the MDE text, and whether
+    """One row's measurement: the effect text, the verdict (with its bound), the MDE text, whether
     the verdict rests on an interval that includes zero (or on none), the only verdicts a blind
-    control may replace."""
+    control may replace, and the row's tests for the Holm family (hypothesis -> p: every hypothesis
+    the verdict rules can reject on this row) with the ones its verdict rests on."""
     text: str
     verdict: str
     mde: str = "–"
     no_effect: bool = False
     interval: bool = False  # the text prints a 95 % interval (counted in the caption's family)
     seeds: str = "–"        # the seed rule: seeds (runs for r) the MDE needs to reach its target
+    tests: dict[str, float] = field(default_factory=dict)
+    rests: tuple[str, ...] = ()
+    p: float | None = None        # the verdict's p (the largest of those it rests on), after Holm
+    holm_p: float | None = None   # its Holm-adjusted p (the largest adjusted p it rests on)
 
 
 def _mde_text(mde: float | None, decimals: int, why: str) -> str:
@@ -158,51 +218,95 @@ def seed_target(claim: Claim) -> float | None:
     return abs(claim.paper) / 2.0 if claim.paper else None
 
 
+def _met(m: int | None, have: int, unit: str = "") -> str:
+    if m is None:
+        return f"> {SEEDS_CAP}{unit}"
+    return f"{m}{unit} (met)" if have >= m else f"{m}{unit} ({m - have} more)"
+
+
 def _seeds_text(claim: Claim, d: Diff) -> str:
     """'12 (9 more)' / '3 (met)': the paired seeds at which this row's observed spread gives an MDE of at
-    most `seed_target`, against the seeds it ran."""
+    most `seed_target` (a robustness row: TOST power 80 % at a true difference of zero), against the
+    seeds it ran."""
     target = seed_target(claim)
     if target is None:
         return "– (no target)"
     if d.method != "paired" or d.se is None:
         return "n/a (" + ("one seed" if d.method == "paired" else "unpaired") + ")"
-    m = seeds_for_mde(d.se, d.n_a, target)
-    if m is None:
-        return f"> {SEEDS_CAP}"
-    return f"{m} (met)" if d.n_a >= m else f"{m} ({m - d.n_a} more)"
+    if claim.direction == 0:
+        return _met(seeds_for_tost(d.se * math.sqrt(d.n_a), ROBUST_MARGIN_DB), d.n_a)
+    return _met(seeds_for_mde(d.se, d.n_a, target), d.n_a)
 
 
-def _runs_text(claim: Claim, n: int) -> str:
-    """The seed rule for a correlation: runs at which the smallest detectable |r| is half the paper's r."""
-    target = seed_target(claim)
-    if target is None or target >= 1.0:
-        return "– (no target)"
-    m = runs_for_r(target)
-    return f"{m} runs (met)" if n >= m else f"{m} runs ({m - n} more)"
+def lambda_seed_points(res: Results, ids: list[str], protocol: Any, axis: str, metric: str,
+                       scale: float = 1.0) -> tuple[list, list[float], list[float]]:
+    """(seed, lambda value, metric in display units) per done run of the lambda grid among `ids` (one
+    regime); the seed is None for a run without one."""
+    seeds: list = []
+    xs: list[float] = []
+    ys: list[float] = []
+    concrete = res.resolve(metric, protocol)
+    if concrete is None or axis not in res.runs.columns:
+        return seeds, xs, ys
+    for rid in [r for r in ids if same(res.runs.at[r, "study"], "lambda_grid")]:
+        lam, v = res.runs.at[rid, axis], res.value(rid, concrete)
+        if res.runs.at[rid, "status"] != "done" or is_null(lam) or not math.isfinite(v):
+            continue
+        seed = res.runs.at[rid, "seed"]
+        seeds.append(None if is_null(seed) else int(seed))   # runs without a seed share one intercept
+        xs.append(float(lam))
+        ys.append(scale * v)
+    return seeds, xs, ys
 
 
-def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> Measured:
-    """Measured effect, verdict and MDE of one claim on one scene."""
+def _measure_r(res: Results, claim: Claim, ids: list[str], protocol: Any) -> Measured:
+    """A lambda claim by its within-seed analysis (module docstring)."""
     sp = metric_spec(claim.metric)
-    concrete = res.resolve(claim.metric, protocol)
-    if concrete is None:
+    seeds, xs, ys = lambda_seed_points(res, ids, protocol, claim.correlation or "", claim.metric, sp.scale)
+    fit, why = within_seed(seeds, xs, ys)
+    if fit is None:
+        return Measured(f"n/a ({why})", NOT_RUN if len(xs) < 3 else INCONCLUSIVE, no_effect=len(xs) >= 3)
+    mde = _mde_text(mde_within_r(fit.n, fit.seeds), 2, f"{fit.n} runs on {fit.seeds} seeds")
+    target = seed_target(claim)
+    per_seed = max(2, round(fit.n / fit.seeds))
+    seeds_txt = ("– (no target)" if target is None or target >= 1.0
+                 else _met(seeds_for_within_r(target, per_seed), fit.seeds, " seeds"))
+    slope = (f"; slope {fit.slope:+.3f} [{fit.slope_lo:+.3f}, {fit.slope_hi:+.3f}] {sp.label} per unit, "
+             f"p {fit.p:.2g}")
+    if fit.r_lo is None or fit.r_hi is None:
+        return Measured(f"within-seed r = {fit.r:+.2f} [n/a] (n={fit.n}, {fit.seeds} seeds){slope}", INCONCLUSIVE,
+                        mde, True, seeds=seeds_txt)
+    lo, hi = fit.r_lo, fit.r_hi
+    v = verdict(claim.direction, lo, hi, paper=claim.paper, decimals=claim.paper_decimals)
+    excludes_zero = lo > 0 or hi < 0
+    p_paper = p_r_against(fit.r, claim.paper, fit.n, fit.seeds) if claim.paper is not None else None
+    text = (f"within-seed r = {fit.r:+.2f} [{lo:+.2f}, {hi:+.2f}]{' *' if excludes_zero else ''} "
+            f"(n={fit.n}, {fit.seeds} seeds){slope}")
+    return Measured(text, verdict_text(v, claim.direction, lo, hi, claim.paper, claim.paper_decimals), mde,
+                    not excludes_zero, True, seeds_txt, _tests(zero=fit.p, paper=p_paper), rests_on(v, claim.direction))
+
+
+def _measure_robust(claim: Claim, d: Diff, text: str, mde: str, seeds: str) -> Measured:
+    """A robustness claim by TOST against +-margin (module docstring)."""
+    if d.se is None or d.df is None or d.delta is None:
+        return Measured(text, INCONCLUSIVE, mde, True, d.has_interval, seeds)
+    eq = tost(d.delta, d.se, d.df, ROBUST_MARGIN_DB)
+    v = verdict(0, eq.lo, eq.hi)
+    text += (f"; {100 * (1 - 2 * TOST_ALPHA):g} % [{eq.lo:+.2f}, {eq.hi:+.2f}], TOST p {eq.p:.2g}")
+    power = (f"TOST power {tost_power(d.se * math.sqrt(d.n_a), d.n_a, ROBUST_MARGIN_DB):.2f} at 0"
+             if d.method == "paired" and d.n_a >= 2 else mde)
+    return Measured(text, v, power, not d.significant, d.has_interval, seeds, _tests(tost=eq.p, harm=eq.p_harm),
+                    rests_on(v, 0))
+
+
+def measure(res: Results, claim: Claim, ids: list[str], protocol: Any) -> Measured:
+    """Measured effect, verdict and MDE of one claim on the runs `ids` of its study in one regime."""
+    sp = metric_spec(claim.metric)
+    if res.resolve(claim.metric, protocol) is None:
         return Measured("n/a (metric not defined for this protocol)", NOT_RUN)
     if claim.correlation:
-        xs, ys = lambda_points(res, scene, protocol, claim.correlation, claim.metric)
-        mde = _mde_text(mde_r(len(xs)), 2, f"{len(xs)} runs, need 4")
-        r, why = pearson(xs, ys)
-        if r is None:
-            return Measured(f"n/a ({why})", NOT_RUN if len(xs) < 3 else INCONCLUSIVE, mde, len(xs) >= 3)
-        ci, runs = pearson_interval(r, len(xs)), _runs_text(claim, len(xs))
-        if ci is None:
-            return Measured(f"r = {r:+.2f} [n/a: {len(xs)} runs, need 4] (n={len(xs)})", INCONCLUSIVE, mde, True,
-                            seeds=runs)
-        v = verdict(claim.direction, *ci, paper=claim.paper, decimals=claim.paper_decimals)
-        excludes_zero = ci[0] > 0 or ci[1] < 0
-        return Measured(f"r = {r:+.2f} [{ci[0]:+.2f}, {ci[1]:+.2f}]{' *' if excludes_zero else ''} (n={len(xs)})",
-                        verdict_text(v, claim.direction, *ci, claim.paper, claim.paper_decimals), mde,
-                        not excludes_zero, True, runs)
-    ids = res.run_ids(study=claim.study, scene=scene, protocol=protocol)
+        return _measure_r(res, claim, ids, protocol)
+    concrete = res.resolve(claim.metric, protocol)
     a, b = _select(res, ids, claim.row), _select(res, ids, claim.reference)
     va, vb = res.seed_values(a, concrete, sp.scale), res.seed_values(b, concrete, sp.scale)
     if not va or not vb:
@@ -214,59 +318,149 @@ def measure(res: Results, claim: Claim, scene: str, protocol: Any) -> Measured:
     mde, seeds = _mde_text(d.mde, sp.decimals, d.reason or "no spread"), _seeds_text(claim, d)
     if why:
         return Measured(text + f"; setting dropped: {why}", NOT_TESTABLE, mde, interval=d.has_interval, seeds=seeds)
-    v = verdict(claim.direction, d.lo, d.hi, paper=claim.paper, decimals=claim.paper_decimals)
     why_blind = starved(res, a, claim.inputs)
     if why_blind and not d.significant:   # as for controls: an interval that excludes zero is never hidden
         return Measured(text, f"{BLIND}: {why_blind}", mde, True, d.has_interval, seeds)
+    if claim.direction == 0:
+        return _measure_robust(claim, d, text, mde, seeds)
+    v = verdict(claim.direction, d.lo, d.hi, paper=claim.paper, decimals=claim.paper_decimals)
+    p_paper = None
+    if claim.paper is not None and d.se is not None and d.df and d.delta is not None:   # se 0: exact
+        p_paper = (p_two_sided((d.delta - claim.paper) / d.se, d.df) if d.se > 0.0
+                   else float(d.delta == claim.paper))
     return Measured(text, verdict_text(v, claim.direction, d.lo, d.hi, claim.paper, claim.paper_decimals), mde,
-                    not d.significant, d.has_interval, seeds)
+                    not d.significant, d.has_interval, seeds, _tests(zero=d.p, paper=p_paper),
+                    rests_on(v, claim.direction))
 
 
-def claims_table(res: Results, claims: list[Claim] | None = None) -> list[Table]:
-    """One row per claim and scene the claim's study ran on ('not run' when it did not run at all);
-    no table when none of the claims' studies ran."""
-    claims = PAPER_CLAIMS if claims is None else claims
-    if not any(res.run_ids(study=c.study) for c in claims):
-        return []
-    blind = blind_claims(res)
-    rows, k = [], 0
+def holm_qualify(measured: list[tuple[Claim, Measured]], later: frozenset[str] = frozenset()) -> int:
+    """Holm across every test of every row (`Measured.tests`: the family is fixed by the rules, not by
+    the verdicts); a verdict is qualified '(fails Holm)' when a hypothesis it rejects has a Holm p above
+    ALPHA, and '(after a second look)' when its study is in `later` (its grid got seeds after a look at
+    the results). Sets each row's p / Holm p (those its verdict rests on, else its zero / TOST test) in
+    place; returns the family's size."""
+    family = [(m, name, p) for _c, m in measured for name, p in m.tests.items()]
+    adjusted = {(id(m), name): hp for (m, name, _p), hp in zip(family, holm([p for _m, _n, p in family]))}
+    for c, m in measured:
+        base = m.verdict.split(":", 1)[0]
+        rests = m.rests if base in REJECTING else ()
+        shown = [n for n in rests if n in m.tests] or [n for n in ("zero", "tost") if n in m.tests][:1]
+        if shown:
+            m.p = max(m.tests[n] for n in shown)
+            m.holm_p = max(adjusted[(id(m), n)] for n in shown)
+        if base not in REJECTING:
+            continue
+        fails = any(adjusted.get((id(m), n), 1.0) > ALPHA for n in rests)
+        notes = ([FAILS_HOLM] if fails else []) + ([SECOND_LOOK] if c.study in later else [])
+        m.verdict = qualified(m.verdict, notes)
+    return len(family)
+
+
+def _p_text(m: Measured) -> str:
+    if m.p is None:
+        return "–"
+    return f"{m.p:.2g} ({m.holm_p:.2g})" if m.holm_p is not None else f"{m.p:.2g}"
+
+
+@dataclass
+class ClaimRow:
+    """One claim in one regime (regime None: the claim's study did not run): its measurement and the
+    control that guards it there."""
+    claim: Claim
+    regime: Regime | None = None
+    label: str = "–"
+    guard: Guard | None = None
+    measured: Measured | None = None
+
+
+def regime_cell(regime: Regime, protocol: Any, kinds: dict[str, str] | None) -> str:
+    """The Regime column: the declared regime's name with its scene, else the regime in full."""
+    d = declared(regime)
+    if d is None:
+        return regime_label(regime, protocol, kinds)
+    return f"{d.name}: " + regime_label(regime, protocol, kinds, name=False).split(", ", 1)[0]
+
+
+def claim_rows(res: Results, claims: list[Claim] | None = None,
+               later: frozenset[str] = frozenset(), kinds: dict[str, str] | None = None) -> list[ClaimRow]:
+    """One row per claim and regime its study ran in (one row without a regime when it did not run at
+    all), measured, guarded in its regime and Holm-qualified (`holm_qualify`) together."""
+    claims = study_table.paper_claims() if claims is None else claims
+    marks = regime_marks(res)
+    rows: list[ClaimRow] = []
     for c in claims:
         ids = res.run_ids(study=c.study)
-        pairs = scene_protocols(res, ids) if ids else []
-        if not pairs:
-            rows.append(not_run_row(c))
-            continue
-        paper = paper_text(c)
-        for sc, pr in pairs:
-            m = measure(res, c, sc, pr)
-            k += m.interval
+        groups = regime_groups(res, ids) if ids else []
+        if not groups:
+            rows.append(ClaimRow(c))
+        for regime, pr, gids in groups:
+            m = measure(res, c, gids, pr)
+            guard = claim_guard(marks, c.key, regime)
             # blind replaces only the verdicts whose interval includes zero (a robustness "reproduced" too,
             # since a blind study also shows no change): an interval that excludes zero shows the mechanism
-            # whatever the control says
-            if c.key in blind and m.no_effect:
-                m.verdict = blind[c.key]
-            rows.append(Row([c.text, c.source, f"{sc} ({PROTOCOL_SHORT.get(pr, pr)})"],
-                            [Cell(text=paper), Cell(text=m.text), Cell(text=m.mde), Cell(text=m.verdict),
-                             Cell(text=m.seeds)]))
-    cap = ("Claims of the paper's ablation section against gsbench's measurements: effect = compared row minus "
-           "reference row (display units; PSNR in dB, IoU in %), or Pearson r for the lambda claims, with its 95 % "
-           "interval (t interval paired on the seeds both rows ran, a dropped seed is named; Welch when they share "
-           "none; Fisher z for r). MDE = the smallest true effect this design detects (two-sided 5 % t test, 80 % "
-           "power, exact noncentral t) from the observed spread at its n. Paper numbers are compared at the paper's "
-           "decimals. Verdict, for a claim "
-           "with a number: reproduced (interval excludes zero on the paper's side and reaches the paper's value), "
-           "smaller than claimed (excludes zero, lies short of the paper's value), not reproduced (contains zero, "
-           "lies short of the paper's value; the largest compatible effect is printed), opposite (excludes zero on "
-           "the other side), inconclusive (contains zero and the paper's value, or one seed); without a number "
-           "only the side of zero counts; blind = any verdict whose interval includes zero (robustness 'reproduced' "
-           "too) while the claim's positive control ran and showed no marked effect (table claims_controls), or "
-           "while the compared row lacked what the "
-           f"mechanism acts on (for L_ds: an edge map E_d marking under {100 * EDGE_FLOOR:g} % of the pixels); "
-           "robustness claims use a "
-           f"+-{ROBUST_MARGIN_DB} dB margin chosen by gsbench; not run = no runs. " + family_note(k)
-           + " One interval that excludes zero is weak evidence on its own. Seeds for the MDE = the seed rule: how "
-           "many paired seeds this row's observed spread needs for an MDE of at most half the paper's effect (for a "
-           "robustness claim, at most the margin; for r, the runs at which the smallest detectable |r| is half the "
-           "paper's), 'met' when it ran that many.")
-    return [Table("paper_claims", "Paper claims", cap, ["Claim", "Paper source", "Scene"], CLAIM_COLUMNS, rows,
-                  section="claims")]
+            # whatever the controls say; a verdict already blind (no input) keeps its own reason
+            if guard.blind and m.no_effect and not m.verdict.startswith(BLIND):
+                m.verdict = guard.blind
+            rows.append(ClaimRow(c, regime, regime_cell(regime, pr, kinds), guard, m))
+    holm_qualify([(r.claim, r.measured) for r in rows if r.measured is not None], later)
+    return rows
+
+
+def claims_table(res: Results, claims: list[Claim] | None = None, later: frozenset[str] = frozenset(),
+                 kinds: dict[str, str] | None = None, rows: list[ClaimRow] | None = None) -> list[Table]:
+    """One row per claim and regime the claim's study ran in ('not run' when it did not run at all);
+    no table when none of the claims' studies ran. `later`: the studies whose grid got seeds after a
+    look at its results; `kinds`: scene name -> 'synthetic' / 'real'; `rows`: `claim_rows` already made."""
+    claims = study_table.paper_claims() if claims is None else claims
+    if not any(res.run_ids(study=c.study) for c in claims):
+        return []
+    rows = claim_rows(res, claims, later, kinds) if rows is None else rows
+    k = sum(len(r.measured.tests) for r in rows if r.measured is not None)
+    out = []
+    for r in rows:
+        c, m = r.claim, r.measured
+        if m is None or r.guard is None:
+            out.append(not_run_row(c))
+            continue
+        out.append(Row([c.text, c.source, r.label, r.guard.text],
+                       [Cell(text=paper_text(c)), Cell(text=m.text), Cell(text=m.mde), Cell(text=m.verdict),
+                        Cell(text=m.seeds), Cell(text=_p_text(m))]))
+    return [Table("paper_claims", "Paper claims", _caption(k), ["Claim", "Paper source", "Regime", "Guarded by"],
+                  CLAIM_COLUMNS, out, section="claims")]
+
+
+def _caption(k: int) -> str:
+    return ("Claims of the paper's ablation section against gsbench's measurements: effect = compared row minus "
+            "reference row (display units; PSNR in dB, IoU in %), with its 95 % interval (t interval paired on the "
+            "seeds both rows ran, a dropped seed is named; Welch when they share none). Lambda claims: the "
+            "within-seed Pearson r (seed fixed effects: lambda and the metric centred within each seed; Fisher z "
+            "on n - seeds - 2) and the fixed-effects slope with its t interval. MDE = the smallest true effect "
+            "this design detects (two-sided 5 % t test, 80 % power, exact noncentral t; for r, Fisher z) from the "
+            "observed spread at its n. Paper numbers are compared at the paper's decimals. Verdict, for a claim "
+            "with a number: reproduced (interval excludes zero on the paper's side and contains the paper's "
+            "value), larger than claimed (excludes zero, lies wholly beyond the paper's value), smaller than "
+            "claimed (excludes zero, lies wholly short of it), not reproduced (contains zero, lies wholly short "
+            "of the paper's value; the largest compatible effect is printed), opposite (excludes zero on the "
+            "other side), inconclusive (contains zero and the paper's value, or one seed); without a number only "
+            "the side of zero counts. Robustness claims are an equivalence test: TOST at "
+            f"{100 * TOST_ALPHA:g} % a side against +-{ROBUST_MARGIN_DB} dB (a margin chosen by gsbench), "
+            f"reproduced when both one-sided tests reject (the {100 * (1 - 2 * TOST_ALPHA):g} % interval lies "
+            "inside the margin), opposite when that interval lies wholly beyond -margin; their MDE column gives "
+            "TOST's power at a true difference of zero. Regime = where the row's cells ran (scene, training views, "
+            "preset, prior providers); Guarded by = the positive control marked in that regime (table "
+            "claims_controls; a control may use the exact version of the claim's depth prior, and says so). "
+            "blind = any verdict whose interval includes zero (robustness 'reproduced' too) while no control of "
+            "the claim is marked in its regime ('no control in this regime' when none ran there), or while the "
+            "compared row lacked what the mechanism acts on (for L_ds: an "
+            f"edge map E_d marking under {100 * EDGE_FLOOR:g} % of the pixels); not run = no runs. "
+            "Holm: every row's tests form one family, fixed by the rules before any verdict (no effect, and the "
+            "paper's value where it gives one; for robustness TOST and a drop beyond the margin), "
+            f"{k} tests in all, corrected together by Holm at 5 %. p (Holm p) = the p-value of the hypothesis the "
+            "row's verdict rejects (the larger of the two for 'larger' / 'smaller than claimed'; no effect, or "
+            "TOST, where the verdict rejects nothing) and its Holm-adjusted value. A verdict that "
+            "rejects a hypothesis whose Holm p exceeds 0.05 reads '(fails Holm)'; one from a grid whose seeds were "
+            "extended after a look at its results reads '(after a second look)' (docs/grids.md, \"Seeds\"). "
+            "Seeds for the MDE = the seed rule: how many paired seeds this row's observed spread needs for an MDE "
+            "of at most half the paper's effect (robustness: TOST power 80 % at a true difference of zero; lambda "
+            "claims: the seeds, each adding its lambda settings as runs, at which the smallest detectable "
+            "within-seed |r| is half the paper's), 'met' when it ran that many.")

@@ -1,73 +1,43 @@
 """Positive controls of the paper-claims table: for each mechanism a setting where its effect must
-exist if the implementation is right (the control grids, docs/grids.md). A control is *marked* when
+exist if the implementation is right (the control grids, docs/grids.md; each control is declared on its
+control study in methods/gaussiands/study_table.py). A control is *marked* when
 its best row survives Holm's correction across the control's rows (the rows' p-values from the t
 statistics of their intervals, family-wise 5 %) on the expected side. Why Holm: with many rows, some
 interval excludes zero by chance (12 rows of no effect: about one in five controls), and a falsely
 marked control would un-blind the claims it guards. A claim whose control ran and is not marked, and
 whose own interval includes zero, is "blind" in the claims table: the study could not have seen the
 mechanism, so its interval says nothing about the paper's effect.
+
+A control guards a claim only in the regime it ran in (reports/regimes.py: the scene, the training views,
+the preset and the prior providers; the exact version of the claim's depth prior is allowed and named).
+With no marked control in a claim's regime, a claim whose interval includes zero reads "blind: no control
+in this regime".
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import Any
 
-from gsbench.methods.gaussiands.paper import DS_INPUTS
-from gsbench.reports.data import Results, same
-
-from gsbench.reports.display import (AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY, AX_NOISE_TYPE,  # isort: skip
-                                  AX_VIEWS, metric_spec)
+from gsbench.methods.gaussiands import study_table
+from gsbench.methods.gaussiands.study_table import CONTROLS, REGIMES, Control, Regime  # noqa: F401  (CONTROLS: the shipped ones)
+from gsbench.reports.data import Results, is_null, same
+from gsbench.reports.display import metric_spec
+from gsbench.reports.regimes import guard_note, regime_label, run_regimes
 from gsbench.reports.stats import ALPHA, Diff, compare, family_note, holm
-from gsbench.reports.studies import PROTOCOL_SHORT, _axis_label, _axis_rank, _get, scene_protocols
+from gsbench.reports.studies import PROTOCOL_SHORT, _axis_label, _axis_rank, _get
 from gsbench.reports.table import Cell, Column, Row, Table
 
 MARKED, UNMARKED, OPPOSITE, NOT_RUN = "marked", "unmarked", "opposite", "not run"
+NO_CONTROL = "blind: no control in this regime"
 
 
-@dataclass(frozen=True)
-class Control:
-    key: str
-    text: str
-    study: str
-    metric: str
-    direction: int                 # the side the effect must be on: +1 / -1 (row - reference)
-    axes: tuple[str, ...]          # the columns that tell the control's rows apart
-    reference: dict                # axis -> value of the reference row
-    guards: tuple[str, ...] = ()   # claim keys that are blind when this control is not marked
-    inputs: dict = field(default_factory=dict)   # metric -> floor: what a row must have been given
-    where: dict = field(default_factory=dict)    # axis -> the values the control's runs are taken from ({} = all)
-
-
-_DEPTH_CLAIMS = ("depth_ss_raw_psnr", "depth_mm_raw_psnr", "depth_ss_mm_psnr", "depth_ss_raw_mbiou",
-                 "depth_ss_mm_mbiou", "loss_depth_psnr", "lambda_depth_r")
-CONTROLS: list[Control] = [
-    # the guard is the 3-view rows, where the references find the depth term's gain; the 6- and 9-view
-    # rows show it shrink (their own Holm family, guarding nothing), so they cannot dilute the guard
-    Control("depth_psnr", "3 views: L_depth with an exact prior raises held-out PSNR", "control_depth", "psnr", +1,
-            (AX_VIEWS, AX_LAMBDAS[0]), {AX_LAMBDAS[0]: 0.0}, _DEPTH_CLAIMS, where={AX_VIEWS: (3,)}),
-    Control("depth_error", "3 views: L_depth with an exact prior lowers the depth error on covered pixels",
-            "control_depth", "depth_absrel_covered", -1, (AX_VIEWS, AX_LAMBDAS[0]), {AX_LAMBDAS[0]: 0.0},
-            where={AX_VIEWS: (3,)}),
-    Control("depth_psnr_more_views", "6 and 9 views: the PSNR gain of L_depth (expected to shrink)", "control_depth",
-            "psnr", +1, (AX_VIEWS, AX_LAMBDAS[0]), {AX_LAMBDAS[0]: 0.0}, where={AX_VIEWS: (6, 9)}),
-    Control("depth_error_more_views", "6 and 9 views: the covered-pixel depth error under L_depth", "control_depth",
-            "depth_absrel_covered", -1, (AX_VIEWS, AX_LAMBDAS[0]), {AX_LAMBDAS[0]: 0.0}, where={AX_VIEWS: (6, 9)}),
-    Control("depth_noise", "few views, lambda_depth 1: noise on the depth prior lowers PSNR", "control_depth_noise",
-            "psnr", -1, (AX_NOISE_TYPE, AX_NOISE_SEVERITY), {AX_NOISE_TYPE: None, AX_NOISE_SEVERITY: 0},
-            ("noise_motion_blur", "noise_gaussian", "noise_poisson", "noise_salt_pepper")),
-    # does the noise reach the geometry at all? The same runs, the rendered-depth error; it guards nothing:
-    # the depth-noise claims are about PSNR, so only the PSNR control can un-blind them
-    Control("depth_noise_error", "few views, lambda_depth 1: noise on the depth prior raises the depth error "
-            "on covered pixels", "control_depth_noise", "depth_absrel_covered", +1, (AX_NOISE_TYPE, AX_NOISE_SEVERITY),
-            {AX_NOISE_TYPE: None, AX_NOISE_SEVERITY: 0}),
-    Control("ds_mbiou", "capped Gaussians, edge-averaged L_ds raises mBIoU", "control_ds", "mbiou", +1,
-            (AX_LOSSES[2],), {AX_LOSSES[2]: False}, ("loss_ds_miou", "loss_ds_mbiou"),
-            DS_INPUTS),
-    Control("latent_miou", "14 classes: a larger latent d raises mIoU over d = 1", "control_latent", "miou", +1,
-            (AX_LATENT,), {AX_LATENT: 1}, ("latent_16_3", "latent_32_16")),
-    Control("sem_miou", "lambda_sem = 5 against 0: the semantic loss raises mIoU (0 collapses)", "control_sem",
-            "miou", +1, (AX_LAMBDAS[2],), {AX_LAMBDAS[2]: 0.0}, ("lambda_sem_r",)),
-]
+def scene_label(scene: str, protocol: Any, kinds: dict[str, str] | None = None) -> str:
+    """'tabletop-medium-0 (synthetic; 3D-OVS protocol)': the scene, whether gsbench generated it or it
+    is a real capture (when `kinds` knows it), and the semantic protocol it is scored with."""
+    proto = PROTOCOL_SHORT.get(protocol, protocol)
+    kind = (kinds or {}).get(scene)
+    return f"{scene} ({kind}; {proto} protocol)" if kind else f"{scene} ({proto})"
 
 
 def starved(res: Results, rids: list[str], inputs: dict) -> str | None:
@@ -92,6 +62,7 @@ class ControlRow:
     note: str = ""        # why there is no difference, or the input the row lacked
     mark: str = NOT_RUN
     holm_p: float | None = None  # Holm-adjusted p-value across the control's rows, None = no interval
+    regime: Regime | None = None
 
     def text(self, decimals: int) -> str:
         """The row's effect with its interval, MDE, Holm p-value and note."""
@@ -124,15 +95,30 @@ def mark_rows(diffs: list[Diff | None], direction: int) -> list[tuple[str, float
     return out
 
 
-def _measure_rows(res: Results, c: Control) -> list[ControlRow]:
-    """The control's rows, scene by scene, before marking."""
+def regime_groups(res: Results, ids: list[str]) -> list[tuple[Regime, Any, list[str]]]:
+    """(regime, protocol, runs) of the runs `ids`: the declared regimes first, in their order, then the
+    others by scene and label."""
+    regimes = run_regimes(res)
+    groups: dict[tuple, list[str]] = {}
+    for r in ids:
+        pr = res.runs.at[r, "protocol"]
+        groups.setdefault((regimes[r], None if is_null(pr) else pr), []).append(r)
+    order = [d.regime for d in REGIMES]
+
+    def rank(key: tuple) -> tuple:
+        reg, pr = key
+        return (order.index(reg) if reg in order else len(order), regime_label(reg), str(pr))
+    return [(reg, pr, groups[(reg, pr)]) for reg, pr in sorted(groups, key=rank)]
+
+
+def _measure_rows(res: Results, c: Control, kinds: dict[str, str] | None = None) -> list[ControlRow]:
+    """The control's rows, regime by regime, before marking."""
     ids = [r for r in res.run_ids(study=c.study)
            if all(any(same(_get(res, r, a), v) for v in values) for a, values in c.where.items())]
     sp = metric_spec(c.metric)
     out = []
-    for sc, pr in scene_protocols(res, ids):
+    for regime, pr, sids in regime_groups(res, ids):
         concrete = res.resolve(c.metric, pr)
-        sids = [r for r in ids if res.runs.at[r, "scene"] == sc and same(res.runs.at[r, "protocol"], pr)]
         ref = [r for r in sids if all(same(_get(res, r, k), v) for k, v in c.reference.items())]
         combos: list[tuple] = []
         for r in sids:
@@ -140,7 +126,7 @@ def _measure_rows(res: Results, c: Control) -> list[ControlRow]:
             if r not in ref and not any(all(same(x, y) for x, y in zip(t, u)) for u in combos):
                 combos.append(t)
         combos.sort(key=lambda t: tuple(_axis_rank(a, v) for a, v in zip(c.axes, t)))
-        scene = f"{sc} ({PROTOCOL_SHORT.get(pr, pr)})"
+        scene = regime_label(regime, pr, kinds)
         for t in combos:
             label = ", ".join(f"{a.rsplit('.', 1)[-1]}={_axis_label(a, v)}" for a, v in zip(c.axes, t))
             rows = [r for r in sids if all(same(_get(res, r, a), v) for a, v in zip(c.axes, t))]
@@ -150,18 +136,19 @@ def _measure_rows(res: Results, c: Control) -> list[ControlRow]:
             paired = [r for r in ref if all(same(_get(res, r, a), v) for a, v in free)]
             vb = res.seed_values(paired, concrete, sp.scale) if concrete else {}
             if not va or not vb:
-                out.append(ControlRow(scene, label, None, "n/a (" + ("row" if not va else "reference") + " not run)"))
+                out.append(ControlRow(scene, label, None, "n/a (" + ("row" if not va else "reference") + " not run)",
+                                      regime=regime))
                 continue
-            out.append(ControlRow(scene, label, compare(va, vb), starved(res, rows, c.inputs) or ""))
+            out.append(ControlRow(scene, label, compare(va, vb), starved(res, rows, c.inputs) or "", regime=regime))
     return out
 
 
-def control_rows(res: Results, c: Control) -> list[ControlRow]:
+def control_rows(res: Results, c: Control, kinds: dict[str, str] | None = None) -> list[ControlRow]:
     """Every (scene, row) of the control with its mark (mark_rows over all of them); one 'not run' row
     when its study has no run."""
     if not res.run_ids(study=c.study):
         return [ControlRow("–", "–", None, "study not run")]
-    rows = _measure_rows(res, c)
+    rows = _measure_rows(res, c, kinds)
     if not rows:
         return [ControlRow("–", "–", None, "no run in the control's setting")]
     for row, (mark, holm_p) in zip(rows, mark_rows([r.diff for r in rows], c.direction)):
@@ -172,7 +159,11 @@ def control_rows(res: Results, c: Control) -> list[ControlRow]:
 def control_status(res: Results, c: Control) -> str:
     """marked when its best row survives Holm on the expected side; not run when no row has a
     measurement; else unmarked / opposite."""
-    marks = [r.mark for r in control_rows(res, c)]
+    return status_of([r.mark for r in control_rows(res, c)])
+
+
+def status_of(marks: list[str]) -> str:
+    """A control's status from its rows' marks (all its rows, or those of one regime)."""
     if MARKED in marks:
         return MARKED
     if all(m == NOT_RUN for m in marks):
@@ -180,27 +171,62 @@ def control_status(res: Results, c: Control) -> str:
     return OPPOSITE if OPPOSITE in marks and UNMARKED not in marks else UNMARKED
 
 
-def blind_claims(res: Results) -> dict[str, str]:
-    """claim key -> the verdict text of a claim whose control ran and is not marked."""
-    out: dict[str, str] = {}
-    for c in CONTROLS:
-        st = control_status(res, c)
-        if st in (UNMARKED, OPPOSITE):
-            for k in c.guards:
-                out.setdefault(k, f"blind: control {c.key} {st}")
+def regime_marks(res: Results) -> list[tuple[Control, Regime, str, str]]:
+    """(control, a regime it ran in, its status there, its best marked row there or '') for every control
+    that guards a claim; the rows are marked across the whole control (Holm over all its rows), the status
+    is that of the regime's rows."""
+    out = []
+    for c in study_table.controls():
+        if not c.guards or not res.run_ids(study=c.study):
+            continue
+        by: dict[Regime, list[ControlRow]] = {}
+        for r in control_rows(res, c):
+            if r.regime is not None:
+                by.setdefault(r.regime, []).append(r)
+        for reg, rows in by.items():
+            marked = sorted((r for r in rows if r.mark == MARKED), key=lambda r: r.holm_p or 0.0)
+            out.append((c, reg, status_of([r.mark for r in rows]), marked[0].label if marked else ""))
     return out
 
 
-def controls_table(res: Results) -> list[Table]:
+@dataclass
+class Guard:
+    """Which control guards a claim in its regime (`text`, the claims table's Guard column) and the
+    verdict a claim whose interval includes zero gets when none is marked there (`blind`, else None)."""
+    text: str
+    blind: str | None
+
+
+def claim_guard(marks: list[tuple[Control, Regime, str, str]], claim_key: str, regime: Regime) -> Guard:
+    """The guard of one claim in one regime (`regime_marks`): a control guards it only when it ran in the
+    claim's regime, or in it with the exact version of the claim's depth prior (named); the guard names the
+    control and its best marked row."""
+    mine = [m for m in marks if claim_key in m[0].guards]
+    here = [(c, st, row, guard_note(reg, regime)) for c, reg, st, row in mine if guard_note(reg, regime) is not None]
+    marked = [f"{c.key} marked, row {row}" + (f" ({note})" if note else "")
+              for c, st, row, note in here if st == MARKED]
+    if marked:
+        return Guard("; ".join(marked), None)
+    ran = [(c, st, note) for c, st, _row, note in here if st in (UNMARKED, OPPOSITE)]
+    if ran:
+        c, st, note = ran[0]
+        return Guard(f"{c.key} {st}" + (f" ({note})" if note else ""), f"blind: control {c.key} {st}")
+    keys = sorted({m[0].key for m in mine})
+    elsewhere = f"none here ({', '.join(keys)} ran in another regime)" if keys else "none declared for this claim"
+    return Guard(elsewhere, NO_CONTROL)
+
+
+def controls_table(res: Results, kinds: dict[str, str] | None = None) -> list[Table]:
     """One row per control and compared setting: the effect against the control's reference row
     with its 95 % interval, MDE and Holm p-value, and whether it is marked (no table when no control ran)."""
-    if not any(res.run_ids(study=c.study) for c in CONTROLS):
+    declared = study_table.controls()
+    if not any(res.run_ids(study=c.study) for c in declared):
         return []
     rows, k = [], 0
-    for c in CONTROLS:
+    for c in declared:
         ref = ", ".join(f"{a.rsplit('.', 1)[-1]}={_axis_label(a, v)}" for a, v in c.reference.items())
         decimals = metric_spec(c.metric).decimals
-        for r in control_rows(res, c):
+        for r in control_rows(res, c, kinds):
             k += r.diff is not None and r.diff.has_interval
             rows.append(Row([c.text, f"{c.study} ({metric_spec(c.metric).label})", r.scene, f"{r.label} vs {ref}"],
                             [Cell(text=r.text(decimals)), Cell(text=r.mark)]))
@@ -212,7 +238,9 @@ def controls_table(res: Results) -> list[Table]:
            "p-value (from the t statistic of its interval) survives Holm's correction across its control's rows "
            "(Holm p at most 0.05) on the expected side, and a control is marked when its best row "
            "is: a control with no true effect is then marked at most 5 % of the time, however many rows it has. "
-           "A control that ran with no marked row makes the claims it guards 'blind' in the paper-claims table "
-           "where their own interval includes zero.")
-    return [Table("claims_controls", "Positive controls", cap, ["Control", "Study (metric)", "Scene", "Row"], cols,
+           "Regime = where the control ran (scene, training views, preset, prior providers; docs/grids.md, "
+           "\"Regimes\"): a control guards a claim only in the claim's own regime, or in it with the exact "
+           "version of the claim's depth prior. A claim whose interval includes zero reads 'blind' where no control "
+           "is marked in its regime.")
+    return [Table("claims_controls", "Positive controls", cap, ["Control", "Study (metric)", "Regime", "Row"], cols,
                   rows, section="claims")]

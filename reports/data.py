@@ -55,6 +55,7 @@ class Results:
         # plain dicts: selecting runs is the report's inner loop, and DataFrame.iterrows is slow
         self._records = [(str(rid), row) for rid, row in zip(self.runs.index, self.runs.to_dict("records"))]
         self.long_reasons: dict[str, set[str]] = {}  # short reason shown in a cell -> full texts
+        self.regime_cache: dict | None = None  # run id -> Regime (reports/regimes.py, read once)
 
     # ------------------------------------------------------------------ selection
     def run_ids(self, study: Any = "__any__", **eq: Any) -> list[str]:

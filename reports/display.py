@@ -9,12 +9,8 @@ from gsbench.method_table import METHODS, get_spec
 from gsbench.metric_table import LOGICAL_SPEC, METRICS, MetricSpec
 
 from gsbench.methods.gaussiands.study_table import (AX_FORMULATION, AX_LAMBDAS, AX_LATENT, AX_LOSSES, AX_NOISE_SEVERITY,  # noqa: F401  isort: skip
-                             AX_NOISE_TYPE, AX_ORDERING)
+                             AX_NOISE_TYPE, AX_ORDERING, AX_VIEWS)
 from gsbench.methods.gaussiands.study_table import STUDIES as STUDY_TABLE
-from gsbench.methods.gaussiands.study_table import column
-
-# the few-view count (train.views) that the depth controls vary beside lambda_depth
-AX_VIEWS = column("train.views")
 
 # Logical metric -> concrete metric name per protocol ("mIoU" of a 3D-OVS scene is miou_3dovs).
 LOGICAL = {

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from gsbench.methods.gaussiands.paper import LATENT_DIM_MIOU
+from gsbench.methods.gaussiands.study_table import LATENT_DIM_MIOU
 from gsbench.reports.data import Results, same
 from gsbench.reports.plots import _save, plt
 

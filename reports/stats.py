@@ -50,6 +50,7 @@ class Diff:
     dropped: tuple[int, ...] = ()  # seeds left out: on one side only, or not finite on a side
     unseeded_dropped: int = 0      # runs without a seed left out of a paired comparison
     se: float | None = None        # standard error of the difference, None = no spread
+    df: float | None = None        # degrees of freedom of its t statistic, None = no spread
 
     @property
     def has_interval(self) -> bool:
@@ -227,7 +228,7 @@ def _interval(out: Diff, delta: float, se: float | None, df: float | None, t: fl
     if se is None:
         out.reason = "one seed"
         return out
-    out.se = se
+    out.se, out.df = se, df
     mde = mde_t(se, df)  # type: ignore[arg-type]
     out.mde = mde if math.isfinite(mde) else None
     out.lo, out.hi = delta - half, delta + half  # type: ignore[operator]
