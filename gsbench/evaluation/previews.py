@@ -3,13 +3,16 @@ each query's predicted and GT mask, with the metrics of that frame; for removal,
 and after. Saved in the run folder (contract: gsbench.preview_files) for the report to place.
 
 The masks and numbers come from the same metric functions as the scores in results.json, at the
-same camera (protocol, frame set, resolution, query mode), so a picture shows what was scored.
+same camera (protocol, frame set, resolution, query mode), so a picture shows what was scored. In
+`gsbench eval` the predictions are those the scoring computed (`frame_outputs`, kept for the shown
+frames): a shown frame is not decoded again, only rendered once more for its RGB, depth and alpha.
 The arrays are shrunk to `eval.preview_width` pixels wide for display only; the metrics are not.
 """
 from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -21,8 +24,9 @@ from gsbench.resize import resize_area, resize_nearest, resize_rgb
 
 from .block import to_numpy
 from .frames import segmentation_camera, view_name
-from .labels import class_masks, scene_label_masks
+from .labels import class_masks
 from .removal import REMOVAL_IMPL, removal_targets, view_removal_metrics
+from .segmentation import frame_outputs
 
 log = logging.getLogger(__name__)
 DEFAULT_FRAMES = 2
@@ -68,11 +72,10 @@ def _depth_range(depth: np.ndarray, alpha: np.ndarray) -> list[float] | None:
     return [float(np.percentile(d, 2)), float(np.percentile(d, 98))]
 
 
-def _semantics_3dovs(method, scene, i: int, cam, config: dict, mode: str, feats: np.ndarray) -> tuple:
+def _semantics_3dovs(scene, i: int, cam, config: dict, mode: str, pred: np.ndarray) -> tuple:
+    """The preview's queries and masks of 3D-OVS frame i from its predicted class map (H, W)."""
     classes = list(scene.class_names)
-    text = to_numpy(method.embed_text(classes, mode))
     gt = class_masks(scene, i, classes, cam.width, cam.height) or {}
-    pred = ovs3d.ovs3d_predict(feats, text)
     ratio = float(setting(config, "eval.boundary_dilation_ratio"))
     m = ovs3d.ovs3d_view_metrics(pred, gt, classes, dilation_ratio=ratio)
     queries = [{"query": c, "iou": m["iou"][c], "biou": m["biou"][c], "localized": None, "reason": None}
@@ -82,14 +85,14 @@ def _semantics_3dovs(method, scene, i: int, cam, config: dict, mode: str, feats:
     return queries, [pred == k for k in range(len(classes))], gt_masks, impl
 
 
-def _semantics_lerf(method, scene, i: int, cam, config: dict, mode: str, feats: np.ndarray) -> tuple:
-    masks, boxes = scene_label_masks(scene, i, cam.width, cam.height)
+def _semantics_lerf(scene, i: int, cam, config: dict, mode: str, scored: tuple) -> tuple:
+    """The preview's queries and masks of LERF frame i from its scored (relevancy (Q, H, W), GT
+    masks, GT boxes)."""
+    rel, masks, boxes = scored
     names = list(masks)
     if not names:
         return [], [], [], {}
     kernels = lerf.lerf_kernels(cam.width, setting(config, "eval.lerf_kernels"))
-    neg = to_numpy(method.embed_text(list(lerf.CANONICAL_NEGATIVES), mode))
-    rel = lerf.lerf_relevancy(feats, to_numpy(method.embed_text(names, mode)), neg)
     pairs = [lerf.LerfPair(view_name(scene, i), q, rel[k], masks[q], boxes[q]) for k, q in enumerate(names)]
     r = lerf.evaluate_lerf_scene(pairs, missing="error", kernels=kernels)
     by_query = {p["query"]: p for p in r.per_pair}
@@ -104,9 +107,20 @@ def _semantics_lerf(method, scene, i: int, cam, config: dict, mode: str, feats: 
     return queries, preds, [masks[q] for q in names], {"iou": f"{r.impl}+query-{mode}"}
 
 
+def _has_prediction(method, protocol: str, mode: str, pred) -> bool:
+    """Whether a `frame_outputs` value comes from a semantic field: a 3D-OVS class map, or LERF
+    relevancy maps (a LERF frame without queries has none either way: ask the method)."""
+    if protocol == "3dovs":
+        return pred is not None
+    rel, masks, _ = pred
+    return rel is not None or (not masks and method.embed_text(["object"], mode) is not None)
+
+
 def frame_preview(method, scene, i: int, protocol: str, frame_set: str, config: dict, mode: str,
-                  max_width: int) -> tuple[dict, dict]:
-    """(manifest entry, arrays) of labelled view i under `protocol`."""
+                  max_width: int, scored: Optional[dict] = None) -> tuple[dict, dict]:
+    """(manifest entry, arrays) of labelled view i under `protocol`. scored: evaluation's
+    `frame_outputs` holding (protocol, mode, i), whose predictions are shown (nothing is decoded
+    again); without it the frame's predictions are computed here."""
     cam = segmentation_camera(scene, i, protocol, config)
     out = method.render(cam)
     rgb = np.clip(to_numpy(out.rgb), 0.0, 1.0)
@@ -120,12 +134,15 @@ def frame_preview(method, scene, i: int, protocol: str, frame_set: str, config: 
              "semantic_reason": None, "metric_impl": {}, "queries": []}
     preds: list = []
     gts: list = []
-    feats = method.semantic_features(cam, mode)
-    if feats is None:
+    key = (protocol, mode, i)
+    if scored is None or key not in scored:
+        scored = frame_outputs(method, scene, {protocol: [i]}, config, (mode,))
+    pred = scored[key]
+    if not _has_prediction(method, protocol, mode, pred):
         entry["semantic_reason"] = f"method {config.get('method')} has no semantic field"
     else:
         fn = _semantics_3dovs if protocol == "3dovs" else _semantics_lerf
-        entry["queries"], preds, gts, entry["metric_impl"] = fn(method, scene, i, cam, config, mode, to_numpy(feats))
+        entry["queries"], preds, gts, entry["metric_impl"] = fn(scene, i, cam, config, mode, pred)
         if not entry["queries"]:
             entry["semantic_reason"] = "the label file holds no query"
     gt_depth = scene.gt_depth(i)
@@ -185,9 +202,17 @@ def preview_settings(config: dict) -> tuple[int, int]:
     return int(setting(config, "eval.previews")), int(setting(config, "eval.preview_width"))
 
 
+def preview_keys(protocols: list[str], sets: dict, config: dict, mode: str) -> set:
+    """The `frame_outputs` keys (protocol, mode, view id) of the frames `save_previews` shows."""
+    n, _ = preview_settings(config)
+    return {(p, mode, i) for p in protocols for i, _ in pick_frames(sets[p], n)} if n > 0 else set()
+
+
 def save_previews(run_dir: Path, method, scene, protocols: list[str], sets: dict, rec_ids: list[int],
-                  rec_cams: list, config: dict, mode: str, identity: dict) -> Path | None:
-    """Write run_dir/previews for this evaluation (none, and the old ones deleted, when eval.previews is 0)."""
+                  rec_cams: list, config: dict, mode: str, identity: dict,
+                  scored: Optional[dict] = None) -> Path | None:
+    """Write run_dir/previews for this evaluation (none, and the old ones deleted, when eval.previews is 0).
+    scored: the evaluation's `frame_outputs`, whose predictions the pictures show."""
     n, max_width = preview_settings(config)
     if n <= 0:
         remove_previews(run_dir)
@@ -195,7 +220,7 @@ def save_previews(run_dir: Path, method, scene, protocols: list[str], sets: dict
     frames, arrays = [], {}
     for p in protocols:
         for i, frame_set in pick_frames(sets[p], n):
-            entry, arrs = frame_preview(method, scene, i, p, frame_set, config, mode, max_width)
+            entry, arrs = frame_preview(method, scene, i, p, frame_set, config, mode, max_width, scored)
             frames.append(entry)
             arrays[entry["key"]] = arrs
     removal, rarrays, rreason = removal_previews(method, scene, rec_ids, rec_cams, config, n, max_width)

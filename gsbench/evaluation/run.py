@@ -25,9 +25,9 @@ from .block import Block
 from .depth import depth_metrics
 from .frames import frame_sets, train_camera, view_name
 from .image import fps, image_metrics
-from .previews import save_previews
+from .previews import preview_keys, save_previews
 from .removal import removal
-from .segmentation import query_mode, resolve_protocols, segmentation
+from .segmentation import query_mode, resolve_protocols, segmentation, segmentation_frames
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +117,10 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
         out.merge(image_metrics(method, scene, fs.reconstruction, rec_cams, config, progress))
         time_cams = rec_cams or [train_camera(scene.cameras[i], max_width) for i in fs.trained[:8]]
         out.merge(fps(method, time_cams, config))
-        out.merge(segmentation(method, scene, protocols, sets, config))
+        scored = segmentation_frames(method, scene, protocols, sets, config)
+        out.merge(segmentation(method, scene, protocols, sets, config, frames=scored))
+        shown = preview_keys(protocols, sets, config, mode)
+        scored = {k: v for k, v in scored.items() if k in shown}      # what the previews show, no more
         out.merge(removal(method, scene, fs.reconstruction, rec_cams, config))
         out.merge(depth_metrics(method, scene, fs.reconstruction, rec_cams))
     out.merge(_ordering(run_dir))
@@ -147,7 +150,7 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
     }
     with torch.no_grad():
         pv = {k: identity[k] for k in ("run_id", "method", "scene", "providers", "backend")}
-        save_previews(run_dir, method, scene, protocols, sets, fs.reconstruction, rec_cams, config, mode, pv)
+        save_previews(run_dir, method, scene, protocols, sets, fs.reconstruction, rec_cams, config, mode, pv, scored)
     results = run_results(identity=identity, metrics=out.metrics, metric_impl=out.metric_impl,
                           skipped=out.skipped, per_view=out.per_view,
                           view_names=out.frames.get("reconstruction", []), frames=out.frames,

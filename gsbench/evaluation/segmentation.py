@@ -256,11 +256,13 @@ def score_lerf(method, scene, ids: list[int], config: dict, mode: str, configure
 
 
 def segmentation(method, scene, protocols: list[str], sets: dict, config: dict,
-                 modes: tuple = QUERY_MODES) -> Block:
-    """Every protocol x frame set x query mode. sets: protocol -> {frame set: ids}."""
+                 modes: tuple = QUERY_MODES, frames: Optional[dict] = None) -> Block:
+    """Every protocol x frame set x query mode. sets: protocol -> {frame set: ids}. frames:
+    `segmentation_frames` of the same arguments when the caller keeps them (the previews show them),
+    computed here otherwise."""
     configured = query_mode(config)
-    frames = frame_outputs(method, scene, {p: [i for ids in sets[p].values() for i in ids] for p in protocols},
-                           config, tuple(modes))
+    if frames is None:
+        frames = segmentation_frames(method, scene, protocols, sets, config, modes)
     out = Block()
     for p in protocols:
         fn = score_3dovs if p == "3dovs" else score_lerf
@@ -268,6 +270,13 @@ def segmentation(method, scene, protocols: list[str], sets: dict, config: dict,
             for m in modes:
                 out.merge(fn(method, scene, ids, config, m, configured, frame_set, frames))
     return out
+
+
+def segmentation_frames(method, scene, protocols: list[str], sets: dict, config: dict,
+                        modes: tuple = QUERY_MODES) -> dict:
+    """`frame_outputs` of every frame that `segmentation` scores (each rendered and decoded once)."""
+    return frame_outputs(method, scene, {p: [i for ids in sets[p].values() for i in ids] for p in protocols},
+                         config, tuple(modes))
 
 
 def query_mode(config: dict) -> str:

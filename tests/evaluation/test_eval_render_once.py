@@ -82,3 +82,38 @@ def test_render_once_gives_the_same_metrics(tmp_path):
     # one per protocol and mode before
     assert new.renders == new.decodes == n_frames
     assert old.renders == 2 * 2 * n_frames and old.decodes == 2 * n_frames
+    _check_previews_reuse_the_scored_frames(method, new, scene, protocols, sets, config)
+
+
+def _check_previews_reuse_the_scored_frames(method, counting, scene, protocols, sets, config):
+    """The pictures show the scored predictions without decoding again, and those equal, bit for bit,
+    the predictions of a whole decoded map (how the pictures were made before)."""
+    import numpy as np
+
+    from gsbench.evaluation.block import to_numpy
+    from gsbench.evaluation.frames import segmentation_camera
+    from gsbench.evaluation.labels import scene_label_masks
+    from gsbench.evaluation.previews import frame_preview, preview_keys
+    from gsbench.evaluation.segmentation import query_mode, segmentation_frames
+    from gsbench.metrics import lerf, ovs3d
+    mode = query_mode(config)
+    scored = segmentation_frames(counting, scene, protocols, sets, config)
+    keys = preview_keys(protocols, sets, config, mode)
+    assert keys and all(k in scored for k in keys)
+    for p, m, i in sorted(keys):
+        cam = segmentation_camera(scene, i, p, config)
+        feats = to_numpy(method.semantic_features(cam, m))
+        if p == "3dovs":
+            whole = ovs3d.ovs3d_predict(feats, to_numpy(method.embed_text(list(scene.class_names), m)))
+            assert np.array_equal(scored[(p, m, i)], whole)
+        else:
+            queries = list(scene_label_masks(scene, i, cam.width, cam.height)[0])
+            whole = lerf.lerf_relevancy(feats, to_numpy(method.embed_text(queries, m)),
+                                        to_numpy(method.embed_text(list(lerf.CANONICAL_NEGATIVES), m)))
+            assert queries and np.array_equal(scored[(p, m, i)][0], whole)
+        decodes = counting.decodes
+        entry, arrays = frame_preview(counting, scene, i, p, "held-out", config, mode, 320, scored)
+        assert counting.decodes == decodes                       # nothing decoded again
+        alone, alone_arrays = frame_preview(method, scene, i, p, "held-out", config, mode, 320)
+        assert entry == alone and entry["queries"]
+        assert all(np.array_equal(arrays[k], alone_arrays[k]) for k in arrays)
