@@ -74,21 +74,22 @@ def check_identity(raw: Any, cfg: dict, path: Path, summary: Any = None) -> None
                          "(the run's identity cannot be checked)")
     resolved = summary.get("resolved_config_id") if isinstance(summary, dict) else None
     if isinstance(resolved, str):
-        if summary.get("run_id") == recorded and run_id(cfg, fingerprint) == resolved:
+        now = run_id(cfg, fingerprint)
+        if summary.get("run_id") == recorded and now == resolved:
             return
-        now = shorten(run_id(cfg, fingerprint), 40)
-        raise InputError(f"{path}: the config does not give the run's id {shorten(recorded, 40)} (the config it "
-                         f"trained with has id {shorten(resolved, 40)}, this one {now}): it was edited after "
-                         "training (e.g. seed or a loss weight) or belongs to another run; retrain with the new "
-                         "values into a new folder")
-    candidates = [c for c in (cfg, raw) if isinstance(c, dict)]
-    for c in candidates:
+        raise _edited(path, recorded, f"the config it trained with has id {shorten(resolved, 40)}, this one {now}")
+    for c in (c for c in (cfg, raw) if isinstance(c, dict)):
         for form in (c, _as_trained(c)):
             try:
                 if run_id(form, fingerprint) == recorded:
                     return
             except (TypeError, ValueError, KeyError):
                 continue
-    raise InputError(f"{path}: the config does not give the run's id {shorten(recorded, 40)} (computed again: "
-                     f"{shorten(run_id(cfg, fingerprint), 40)}): it was edited after training (e.g. seed or a "
-                     "loss weight) or belongs to another run; retrain with the new values into a new folder")
+    raise _edited(path, recorded, f"computed again: {shorten(run_id(cfg, fingerprint), 40)}")
+
+
+def _edited(path: Path, recorded: str, detail: str) -> InputError:
+    """The one-line refusal of a config.json that is not the one its run trained with."""
+    return InputError(f"{path}: the config does not give the run's id {shorten(recorded, 40)} ({detail}): it was "
+                      "edited after training (e.g. seed or a loss weight) or belongs to another run; retrain with "
+                      "the new values into a new folder")

@@ -18,6 +18,8 @@ from typing import Any, Iterable, Optional
 
 from scipy import stats
 
+from gsbench.collect import number_problem
+
 ALPHA = 0.01            # each metric's prediction interval holds a new seed with probability 0.99
 # A setting whose seeds all gave the same value (a metric of the scene or the priors, not of the
 # training) has no spread: its interval is the value within this relative width, so that an ulp of
@@ -80,15 +82,9 @@ class SpreadRow:
 
 
 def as_number(v: Any) -> Optional[float]:
-    """A stored metric as a finite float; None for null, a string, a bool, a non-finite or an
-    out-of-range value (a 401-digit integer)."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return None
-    try:
-        f = float(v)
-    except OverflowError:
-        return None
-    return f if math.isfinite(f) else None
+    """A stored metric as a finite float; None for null and for anything collect's `number_problem`
+    refuses (a string, a bool, a non-finite or an out-of-range value such as a 401-digit integer)."""
+    return None if v is None or number_problem(v) else float(v)
 
 
 def _seed_values(records: Iterable[dict], metric: str) -> list[float]:
