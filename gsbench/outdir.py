@@ -269,12 +269,17 @@ def refuse_foreign(out: str | os.PathLike, command: str, force_hint: bool = True
         raise InputError(foreign_message(out, s.foreign[0], command, force_hint))
 
 
-def _remove_left_staging(out: Path) -> None:
-    """Staging folders a killed command left beside OUT (marked, so nothing else is ever removed);
-    called under OUT's lock, so none of them is being written."""
-    for d in out.parent.glob(glob.escape(staging_prefix(out)) + "*"):
-        if d.is_dir() and not d.is_symlink() and (d / STAGING_MARK).is_file():
+def remove_left_scratch(parent: Path, prefix: str, mark: str) -> None:
+    """Folders a killed command left in `parent` (named `prefix`..., holding the file `mark`, so nothing
+    else is ever removed); called under the lock of what they stage, so none of them is being written."""
+    for d in parent.glob(glob.escape(prefix) + "*"):
+        if d.is_dir() and not d.is_symlink() and (d / mark).is_file():
             shutil.rmtree(d, ignore_errors=True)
+
+
+def _remove_left_staging(out: Path) -> None:
+    """Staging folders a killed command left beside OUT."""
+    remove_left_scratch(out.parent, staging_prefix(out), STAGING_MARK)
 
 
 class OwnedFolder:

@@ -12,7 +12,7 @@ from gsbench.methods.gaussiands import study_table
 from gsbench.methods.gaussiands.study_table import REGIMES, Claim, Regime
 from gsbench.reports.claims_spread import setting_table, variance_shares
 from gsbench.reports.claims_table import BLIND, NOT_RUN, ClaimRow
-from gsbench.reports.controls import MARKED, control_rows, status_of
+from gsbench.reports.controls import MARKED, regime_marks
 from gsbench.reports.data import Results
 from gsbench.reports.display import metric_spec
 from gsbench.reports.regimes import EXACT_DEPTH, declared, differences, guard_note, regime_label, run_regimes
@@ -122,14 +122,11 @@ def controls_by_regime(res: Results | None) -> Table:
     """One row per control that guards claims: its status in each declared regime, and where else it ran
     (with what separates that regime from the nearest declared one)."""
     out = []
+    ran = regime_marks(res) if res is not None else []
     for c in study_table.controls():
         if not c.guards:
             continue
-        by: dict[Regime, list[str]] = {}
-        for r in control_rows(res, c) if res is not None and res.run_ids(study=c.study) else []:
-            if r.regime is not None:
-                by.setdefault(r.regime, []).append(r.mark)
-        marks = {reg: status_of(m) for reg, m in by.items()}
+        marks = {reg: st for control, reg, st, _ in ran if control.key == c.key}
         cells = [Cell(text=_control_cell(marks, d.regime)) for d in REGIMES]
         elsewhere = []
         for reg, st in marks.items():

@@ -290,14 +290,15 @@ def regime_summary(res: Results | None, rows: list[ClaimRow]) -> str:
     return "; ".join(out)
 
 
-def _matrix_section(res: Results | None, rows: list[ClaimRow], kinds: dict[str, str], scope: str) -> list[str]:
+def _matrix_section(res: Results | None, rows: list[ClaimRow], kinds: dict[str, str], scope: str,
+                    by_regime: str) -> list[str]:
     """The page's opening: the declared regimes, the claim x regime matrix, the claims no regime can test,
-    the controls by regime."""
+    the controls by regime (`by_regime`: regime_summary's counts)."""
     return ["## Claims by regime", "", scope, "",
             "A regime is where a cell ran: its scene, its training views (`train.views`), its preset and its prior "
             "providers, read from the cell's stored config. A positive control guards a claim only in the claim's "
             "regime (docs/grids.md, \"Regimes\"). The declared regimes, the matrix's columns:", "",
-            *regime_lines(kinds), "", f"By regime: {regime_summary(res, rows)}.", "",
+            *regime_lines(kinds), "", f"By regime: {by_regime}.", "",
             matrix_table(rows).to_markdown(),
             f"{UNTESTABLE_MARK} Claims no regime of this world can test: {FIXED_LABELS}. They are still measured, "
             "and read as the matrix says.", "",
@@ -312,7 +313,8 @@ def build_page(current: list[Published], stale: list[Stale], grids: list[Grid], 
         later, kinds = frozenset(g.study for g in grids if g.later_seeds), scene_kinds(current)
         rows = claim_rows(res, later=later, kinds=kinds) if res is not None else []
         claims = (claims_table(res, kinds=kinds, rows=rows) if res is not None else []) or [empty_claims_table()]
-        matrix = _matrix_section(res, rows, kinds, scope_line(current, len(claims[0].rows)))
+        scope, by_regime = scope_line(current, len(claims[0].rows)), regime_summary(res, rows)
+        matrix = _matrix_section(res, rows, kinds, scope, by_regime)
         controls = (controls_table(res, kinds) if res is not None else []) or [empty_controls_table()]
         spread = spread_table(res, kinds=kinds) if res is not None else []
         figures = _figures(res, Path(tmp))
@@ -323,7 +325,6 @@ def build_page(current: list[Published], stale: list[Stale], grids: list[Grid], 
     for m in marks.values():
         mark_counts[m] = mark_counts.get(m, 0) + 1
     verdicts = verdict_summary(claims[0])
-    scope = scope_line(current, len(claims[0].rows))
     guarded = sum(r.guard is not None and r.guard.blind is None for r in rows)
     controls_line = (", ".join(f"{m} {n}" for m, n in mark_counts.items())
                      + f"; claim rows guarded by a control marked in their own regime: {guarded} of {len(rows)}")
@@ -363,7 +364,7 @@ def build_page(current: list[Published], stale: list[Stale], grids: list[Grid], 
     lines += [f"- `{s.cell.grid}/{s.cell.run_id}`: {s.reason}" for s in stale] if stale else ["None."]
     block = (f"{README_BEGIN}\n**Paper claims on CPU** ([docs/claims.md](docs/claims.md), generated from "
              f"`results/cpu/`): {len(current)} of {planned} cells published; claims by regime: "
-             f"{regime_summary(res, rows)}; "
+             f"{by_regime}; "
              f"positive controls: {controls_line}. {scope}\n{README_END}")
     return Page("\n".join(lines).rstrip() + "\n", block, figures)
 

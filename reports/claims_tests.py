@@ -25,7 +25,7 @@ import numpy as np
 from scipy import integrate
 from scipy import stats as sps
 
-from gsbench.reports.stats import LEVEL, POWER, SEEDS_CAP, t_quantile
+from gsbench.reports.stats import LEVEL, POWER, SEEDS_CAP, mde_r, p_two_sided, pearson_interval, t_quantile
 
 TOST_ALPHA = 0.05          # each one-sided test of the equivalence test
 TWO_LOOK_DRAWS = 200_000   # null experiments per two-look simulation
@@ -135,28 +135,16 @@ def within_seed(seeds: list, x: list[float], y: list[float]) -> tuple[WithinSeed
     se = math.sqrt(rss / df / sxx)
     r = max(-1.0, min(1.0, sxy / math.sqrt(sxx * syy)))
     t = slope / se if se > 0.0 else math.copysign(math.inf, slope)
-    p = min(1.0, 2.0 * float(sps.t.sf(abs(t), df)))
     half = t_quantile(df) * se
-    r_lo = r_hi = None
-    if n - k - 2 >= 1:
-        z, zh = math.atanh(max(-1 + 1e-12, min(1 - 1e-12, r))), _z975() / math.sqrt(n - k - 2)
-        r_lo, r_hi = math.tanh(z - zh), math.tanh(z + zh)
-    return WithinSeed(n, k, slope, slope - half, slope + half, df, t, p, r, r_lo, r_hi), None
-
-
-def _z975() -> float:
-    return float(sps.norm.ppf(0.5 + LEVEL / 2.0))
-
-
-def _z_power() -> float:
-    return _z975() + float(sps.norm.ppf(POWER))
+    # Fisher z on n - k - 2: Pearson's interval at n - k + 1 points (the k seed means cost k - 1 more)
+    r_lo, r_hi = pearson_interval(r, n - k + 1) or (None, None)
+    return WithinSeed(n, k, slope, slope - half, slope + half, df, t, p_two_sided(t, df), r, r_lo, r_hi), None
 
 
 def mde_within_r(n: int, seeds: int) -> float | None:
     """Smallest |within-seed r| a two-sided 5 % test detects with 80 % power at n runs on `seeds` seeds
-    (Fisher z on n - seeds - 2)."""
-    dof = n - seeds - 2
-    return math.tanh(_z_power() / math.sqrt(dof)) if dof >= 1 else None
+    (Fisher z on n - seeds - 2: Pearson's MDE at n - seeds + 1 points)."""
+    return mde_r(n - seeds + 1)
 
 
 def p_r_against(r: float, value: float, n: int, seeds: int) -> float | None:

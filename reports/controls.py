@@ -202,7 +202,8 @@ def claim_guard(marks: list[tuple[Control, Regime, str, str]], claim_key: str, r
     claim's regime, or in it with the exact version of the claim's depth prior (named); the guard names the
     control and its best marked row."""
     mine = [m for m in marks if claim_key in m[0].guards]
-    here = [(c, st, row, guard_note(reg, regime)) for c, reg, st, row in mine if guard_note(reg, regime) is not None]
+    notes = [(c, st, row, guard_note(reg, regime)) for c, reg, st, row in mine]
+    here = [n for n in notes if n[3] is not None]
     marked = [f"{c.key} marked, row {row}" + (f" ({note})" if note else "")
               for c, st, row, note in here if st == MARKED]
     if marked:

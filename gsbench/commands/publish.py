@@ -19,8 +19,6 @@ from gsbench.grids.store_format import STORE_VERSION
 from gsbench.grids.store_upgrade import upgrade_store
 from gsbench.store import read_text_bounded
 
-MAX_TEXT_BYTES = 16 * 2**20       # the most of a page or README read
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="?", type=Path, default=None, metavar="RUNS",
@@ -109,6 +107,7 @@ def _status(store: Path, grids: list) -> int:
 
 def _page(args: argparse.Namespace, store: Path, grids: list) -> int:
     from gsbench.reports.claims_page import (  # lazy: start-up
+        MAX_PAGE_BYTES,
         README_BEGIN,
         build_page,
         check_page,
@@ -119,7 +118,7 @@ def _page(args: argparse.Namespace, store: Path, grids: list) -> int:
     )
     if args.check and not args.page.is_file():
         raise InputError(f"{shorten(args.page)}: page not found (generate it without --check first)")
-    readme = read_text_bounded(args.readme, MAX_TEXT_BYTES, "README") if args.readme is not None else None
+    readme = read_text_bounded(args.readme, MAX_PAGE_BYTES, "README") if args.readme is not None else None
     if not args.check:                 # refused before the long part: a page or README gsbench would not write
         shown_figures(args.page)
         if readme is not None:
@@ -132,7 +131,7 @@ def _page(args: argparse.Namespace, store: Path, grids: list) -> int:
         return 0
     folder = figure_folder(args.page)
     names = [p.name for p in folder.glob("dose_*.png")] if folder.is_dir() else []
-    diff = check_page(page, read_text_bounded(args.page, MAX_TEXT_BYTES, "page"), readme, names)
+    diff = check_page(page, read_text_bounded(args.page, MAX_PAGE_BYTES, "page"), readme, names)
     for line in diff:
         print(line)
     if diff:

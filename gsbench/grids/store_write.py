@@ -33,7 +33,7 @@ from typing import Iterable, Optional
 
 from gsbench.errors import InputError, shorten
 from gsbench.grids.store_format import SHARED_DIR, remove_unused_parts, write_record
-from gsbench.outdir import exchange, lock_path
+from gsbench.outdir import exchange, lock_path, remove_left_scratch, resolved
 from gsbench.runlock import RunLock
 
 log = logging.getLogger(__name__)
@@ -72,7 +72,7 @@ class StoreWriter:
 
     def __init__(self, store: str | os.PathLike, command: str) -> None:
         store = Path(os.path.abspath(store))
-        self.store = store.resolve() if store.is_symlink() else store    # the folder, not a link to it
+        self.store = resolved(store) if store.is_symlink() else store    # the folder, not a link to it
         self.command = command
         self._lock: Optional[RunLock] = None
         self._seen: dict[str, tuple] = {}          # the store's files at the copy: rel -> signature
@@ -101,10 +101,7 @@ class StoreWriter:
     def _remove_left_scratch(self) -> None:
         """Scratch folders and old stores a killed writer left beside the store (marked; under the lock,
         so none is in use), and its mark in the store itself."""
-        prefix = scratch_prefix(self.store)
-        for d in sorted(self.store.parent.iterdir()):
-            if d.name.startswith(prefix) and d.is_dir() and not d.is_symlink() and (d / SCRATCH_MARK).is_file():
-                shutil.rmtree(d, ignore_errors=True)
+        remove_left_scratch(self.store.parent, scratch_prefix(self.store), SCRATCH_MARK)
         mark = self.store / SCRATCH_MARK
         if mark.is_file() and not mark.is_symlink():
             mark.unlink()

@@ -110,23 +110,25 @@ def run_phase(tr: Trainer, run_dir: Path, eval_fn: Optional[Callable[[GaussianFi
     finally:
         _SIGTERM["in_steps"] = False
         bar.close()
+    _checkpoint_checked(tr, run_dir)
+    if _SIGTERM["received"]:        # came after the last step: the phase is whole and checkpointed
+        raise Terminated()
+    return tr.field
+
+
+def _checkpoint_checked(tr: Trainer, run_dir: Path) -> None:
+    """The phase's checkpoint after its steps stopped: written only when no step was non-finite."""
     tr.synchronize()
     tr.raise_if_bad()
     tr.check_finite("parameters")
     save_torch_atomic(Path(run_dir) / rundir.CHECKPOINT, tr.state())
-    if _SIGTERM["received"]:        # came after the last step: the phase is whole and checkpointed
-        raise Terminated()
-    return tr.field
 
 
 def _stop_if_terminated(tr: Trainer, run_dir: Path) -> None:
     """After a step: when SIGTERM came during it, checkpoint this step (a finite one) and stop."""
     if not _SIGTERM["received"]:
         return
-    tr.synchronize()
-    tr.raise_if_bad()
-    tr.check_finite("parameters")
-    save_torch_atomic(Path(run_dir) / rundir.CHECKPOINT, tr.state())
+    _checkpoint_checked(tr, run_dir)
     log.warning("SIGTERM: stopped phase %s at step %d of %d; its checkpoint is saved", tr.phase, tr.step,
                 tr.iterations)
     raise Terminated()
