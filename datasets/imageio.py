@@ -66,8 +66,8 @@ def apply_orientation(img: np.ndarray, value: int) -> np.ndarray:
     return np.ascontiguousarray(turns[value](img)) if value in turns else img
 
 
-def _header_size(path: Path) -> tuple[int, int]:
-    """(width, height) from the header, as displayed (an EXIF orientation of 5 to 8 swaps them): a
+def _stored_size(path: Path) -> tuple[int, int]:
+    """(width, height) of the stored pixels from the header (before any EXIF orientation): a
     PNG's IHDR read directly, other formats through PIL's lazy open (its decompression-bomb warning
     silenced: the budget below decides)."""
     from PIL import Image
@@ -85,23 +85,24 @@ def _header_size(path: Path) -> tuple[int, int]:
         except Image.DecompressionBombError:     # over PIL's own limit, which lies above the budget
             raise InputError(f"{path}: refused: more than {MAX_IMAGE_PIXELS} pixels, the most gsbench "
                              "decodes in one image") from None
-    return (h, w) if orientation(path) >= 5 else (w, h)
+    return w, h
 
 
 def image_size(path: Path) -> tuple[int, int]:
-    """(width, height) from the file header, without decoding the pixels; an image of more than
-    MAX_IMAGE_PIXELS pixels is refused here, before anything decodes it."""
+    """(width, height) as displayed (an EXIF orientation of 5 to 8 swaps them), from the file header,
+    without decoding the pixels; an image of more than MAX_IMAGE_PIXELS pixels is refused here, before
+    anything decodes it."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: image file not found")
     try:
-        w, h = _header_size(path)
+        w, h = _stored_size(path)
     except InputError:
         raise
     except Exception as e:  # PIL raises several types for unreadable files
         raise InputError(f"{path}: cannot read image header ({type(e).__name__}: {str(e)[:120]})") from None
     _check_pixels(path, w, h)
-    return w, h
+    return (h, w) if orientation(path) >= 5 else (w, h)
 
 
 def _check_pixels(path: Path, w: int, h: int) -> None:
@@ -115,7 +116,7 @@ def _decode(path: Path, flags: int) -> np.ndarray:
     if not path.is_file():
         raise InputError(f"{path}: image file not found")
     try:
-        _check_pixels(path, *_header_size(path))
+        _check_pixels(path, *_stored_size(path))       # w * h: the orientation does not matter
     except InputError:
         raise
     except Exception:   # a header PIL cannot read (a corrupt file, EXR): OpenCV's decoder judges it,

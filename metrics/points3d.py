@@ -35,7 +35,7 @@ from scipy.spatial import cKDTree
 
 from gsbench.errors import InputError
 
-from ._common import finite_float, to_numpy, unit_rows
+from ._common import finite_float, mean_or_none, same_shape, to_numpy, unit_rows
 
 POINTS3D_IMPL = {"nearest": "3d-points/argmax-cos/nearest/v1",
                  "radius": "3d-points/argmax-cos/radius-majority/v1"}
@@ -257,8 +257,7 @@ def point_miou_macc(pred: Any, gt: Any, num_classes: int) -> PointScores:
         raise InputError(f"num_classes: must be > 0, got {num_classes!r}")
     pr = _labels(pred, "pred", c)
     g = _labels(gt, "gt", c)
-    if pr.shape != g.shape:
-        raise InputError(f"pred has shape {pr.shape} but gt has shape {g.shape}; they must match")
+    same_shape(pr, g, "pred", "gt")
     scored = g >= 0
     pr, g = pr[scored], g[scored]
     gt_count = np.bincount(g, minlength=c)
@@ -270,10 +269,8 @@ def point_miou_macc(pred: Any, gt: Any, num_classes: int) -> PointScores:
         union = int(gt_count[k] + pred_count[k] - tp[k])   # TP + FP + FN
         iou[k] = float(tp[k]) / union if union > 0 else 0.0
         acc[k] = float(tp[k]) / float(gt_count[k]) if gt_count[k] > 0 else 0.0
-    miou = math.fsum(iou.values()) / len(present) if present else None
-    macc = math.fsum(acc.values()) / len(present) if present else None
-    return PointScores(miou=miou, macc=macc, iou=iou, acc=acc, present=present,
-                       n_points=int(g.size), n_unclassified=int(np.count_nonzero(pr < 0)))
+    return PointScores(miou=mean_or_none(iou.values()), macc=mean_or_none(acc.values()), iou=iou, acc=acc,
+                       present=present, n_points=int(g.size), n_unclassified=int(np.count_nonzero(pr < 0)))
 
 
 def _labels(x: Any, name: str, num_classes: int) -> np.ndarray:

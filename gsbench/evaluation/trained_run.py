@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from gsbench import rundir
-from gsbench.config import run_config, run_id
+from gsbench.config import get_dotted, run_config, run_id, set_dotted
 from gsbench.datasets import load_scene
 from gsbench.errors import InputError, shorten
 from gsbench.methods.base import Method
@@ -36,8 +36,7 @@ def load_run(run_dir: str | Path):
     if method.name != cfg["method"]:
         raise InputError(f"{run_dir / rundir.CONFIG}: names method {cfg['method']!r}, but the model in "
                          f"{rundir.MODEL} is {method.name!r} (the folder mixes two runs)")
-    summary = run_dir / rundir.TRAIN_SUMMARY
-    check_identity(raw, cfg, run_dir / rundir.CONFIG, read_json(summary) if summary.exists() else None)
+    check_identity(raw, cfg, run_dir / rundir.CONFIG, rundir.read_optional(run_dir / rundir.TRAIN_SUMMARY))
     scene = load_scene(cfg["scene"]["path"])
     return method, cfg, scene
 
@@ -47,12 +46,11 @@ def _as_trained(cfg: dict) -> dict:
     `dropped` (a dotted key holding False) back on. The run id was computed from this config."""
     out = copy.deepcopy(cfg)
     for part in cfg.get("dropped") or {}:
-        *path, leaf = str(part).split(".")
-        d = out
-        for p in path:
-            d = d.get(p) if isinstance(d, dict) else None
-        if isinstance(d, dict) and d.get(leaf) is False:
-            d[leaf] = True
+        try:
+            if get_dotted(out, str(part)) is False:
+                set_dotted(out, str(part), True)
+        except KeyError:
+            continue
     return out
 
 

@@ -71,7 +71,9 @@ class _CheckpointedChunk(torch.autograd.Function):
             return (None,) * len(saved)
         with torch.enable_grad():
             o, t, _ = _composite_chunk(*inputs)
-            grads = iter(torch.autograd.grad((o, t), wrt, (grad_o, grad_t), allow_unused=True))
+            # only the outputs on the graph: with the geometry held constant the transmittance is not
+            outs = [(x, g) for x, g in ((o, grad_o), (t, grad_t)) if x.requires_grad]
+            grads = iter(torch.autograd.grad([x for x, _ in outs], wrt, [g for _, g in outs], allow_unused=True))
         return tuple(next(grads) if need else None for need in ctx.needs_input_grad)
 
 

@@ -193,11 +193,6 @@ def latent_render(ctx: StepContext, detach_geometry: bool) -> torch.Tensor:
     scales, rotations and opacities are constants here). The colours are constants either way."""
     p, backend = ctx.params, ctx.trainer.backend
     keep = (lambda t: t.detach()) if detach_geometry else (lambda t: t)
-    opacity = keep(p["opacity_logits"])
-    if detach_geometry and backend == "torch":
-        # the torch rasterizer's checkpointed backward needs its transmittance on the graph: the opacities
-        # enter with a zero-weight link to the parameters (the same values, a gradient of exactly zero)
-        opacity = opacity + 0.0 * p["opacity_logits"]
-    fld = GaussianField(keep(p["means"]), keep(p["log_scales"]), keep(p["quats"]), opacity,
+    fld = GaussianField(keep(p["means"]), keep(p["log_scales"]), keep(p["quats"]), keep(p["opacity_logits"]),
                         p["colors"].detach(), p["features"])
     return render(fld, ctx.trainer.views.cameras[ctx.view_id], backend=backend).features

@@ -457,3 +457,22 @@ def test_memory_bounded_256x256_50k_with_gradients():
     peak_gb = float(res.stdout.strip().splitlines()[-1])   # ru_maxrss is in KiB on Linux
     print(f"peak RSS {peak_gb:.2f} GiB")
     assert peak_gb < 3.0
+
+
+def test_channels_alone_on_the_graph_get_the_same_gradient():
+    """Geometry and opacities held constant (only the colours and features require grad), as GaussianDS's
+    `sem_geometry=detached` renders: the checkpointed backward differentiates only the outputs on the
+    graph, and the channels' gradients equal those of a render with everything on the graph."""
+    field, cam = random_field(80, 11, d=4), CAMERAS[0]()
+    full = backward_grads(field, cam, seed=1)
+    chans = GaussianField(*(getattr(field, k).detach() for k in PARAMS[:4]),
+                          field.colors.detach().clone().requires_grad_(True),
+                          field.features.detach().clone().requires_grad_(True))
+    out = render(chans, cam, backend="torch")
+    g = torch.Generator().manual_seed(1)      # the same functional as backward_grads: the same weights
+    # the transmittance is an output of the chunk's Function but not on the recomputed graph: the case
+    # its backward must handle (before, torch.autograd.grad refused it)
+    sum((o * torch.randn(o.shape, generator=g, dtype=o.dtype)).sum()
+        for o in (out.rgb, out.depth, out.alpha, out.features)).backward()
+    assert torch.allclose(chans.colors.grad, full["colors"], rtol=1e-12, atol=1e-15)
+    assert torch.allclose(chans.features.grad, full["features"], rtol=1e-12, atol=1e-15)

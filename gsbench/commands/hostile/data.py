@@ -20,6 +20,7 @@ import numpy as np
 
 from gsbench.commands.hostile import Hostile, tiny_scene
 from gsbench.datasets.colmap import read_colmap
+from gsbench.datasets.imageio import EXIF_ORIENTATION
 
 VIEW = "frame_00003.png"         # the view most corruptions break (index 2)
 LABEL = Path("label") / "tabletop-small" / "frame_00003.json"
@@ -225,7 +226,6 @@ def _truncate(path: Path, lose: int = 0) -> None:
 
 
 JPG = VIEW.replace(".png", ".jpg")
-EXIF_ORIENTATION = 0x0112
 
 
 def write_jpeg(path: Path, pixels: np.ndarray, orientation: int = 1, quality: int = 95) -> None:
