@@ -28,7 +28,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 # The fake interpreter: one JSON line per call (argv, offline env, own session); `-c` answers the CUDA
 # check; ablate writes finished cells, and for grids named in FAKE_SLOW (stops on SIGINT) or FAKE_STUBBORN
-# (ignores SIGINT) leaves one cell running and waits for the deadline.
+# (ignores SIGINT) leaves one cell running and waits for the deadline. An ablate says it is ready (its
+# SIGINT handling set, its cells written) with a file FAKE_READY/<pid>: the script's signals wait for it
+# (_after_ready), so no test races a process it started.
 FAKE_PYTHON = """#!{python}
 import os, signal, sys
 from pathlib import Path
@@ -61,6 +63,8 @@ if argv[:3] == ["-m", "gsbench.cli", "ablate"]:
     if grid.stem in os.environ.get("FAKE_SLOW", "") + os.environ.get("FAKE_STUBBORN", ""):
         d = out / "running"; d.mkdir(parents=True)
         (d / "cell_status.json").write_text(json.dumps({{"state": "running"}}))
+    (Path(os.environ["FAKE_READY"]) / str(os.getpid())).write_text("ready")
+    if grid.stem in os.environ.get("FAKE_SLOW", "") + os.environ.get("FAKE_STUBBORN", ""):
         time.sleep(60)
 """
 
@@ -69,6 +73,20 @@ def _script():
     spec = importlib.util.spec_from_file_location("gpu_claims_script", ROOT / "scripts" / "gpu_claims.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
+    return mod
+
+
+def _after_ready(mod, ready: Path):
+    """The script with its deadline signals held until the fake they go to is ready (FAKE_PYTHON), so a
+    slow start under load can never meet the SIGINT before its handler is set; bounded at 60 s."""
+    send = mod._signal_group
+
+    def signal_when_ready(pid: int, sig: int) -> None:
+        until = time.monotonic() + 60.0
+        while not (ready / str(pid)).exists() and time.monotonic() < until:
+            time.sleep(0.05)
+        send(pid, sig)
+    mod._signal_group = signal_when_ready
     return mod
 
 
@@ -83,14 +101,18 @@ def machine(tmp_path, monkeypatch):
     for w in ("gsplat-1.5.3-py3-none-any.whl", "pycolmap-3.12.6-cp312-cp312-manylinux_2_28_x86_64.whl"):
         (wheels / w).write_bytes(b"")
     log = tmp_path / "calls.jsonl"
+    ready = tmp_path / "ready"
+    ready.mkdir()
     monkeypatch.setenv("FAKE_LOG", str(log))
+    monkeypatch.setenv("FAKE_READY", str(ready))
     monkeypatch.setenv("FAKE_CELLS", "2")
 
     def no_network(*a, **k):
         raise AssertionError("gpu_claims tried to open a network connection")
     monkeypatch.setattr(socket, "create_connection", no_network)
     monkeypatch.setattr(socket.socket, "connect", no_network)
-    return {"exe": exe, "wheels": wheels, "log": log, "runs": tmp_path / "runs", "store": tmp_path / "gpu"}
+    return {"exe": exe, "wheels": wheels, "log": log, "runs": tmp_path / "runs", "store": tmp_path / "gpu",
+            "ready": ready}
 
 
 def _calls(log: Path) -> list[dict]:
@@ -117,9 +139,10 @@ def test_budget_stops_running_grids_leaves_the_rest_and_publishes_finished_cells
     monkeypatch.setenv("FAKE_STUBBORN", "depth_formulation-cpu")
     (m["store"] / "ordering-cpu").mkdir(parents=True)        # a grid with published cells: reused first
     t0 = time.monotonic()
-    rc = _script().main(_argv(m, "--grids", "ordering-cpu", "depth_formulation-cpu", "control_sem-cpu",
-                              "--jobs", "5", "--lanes", "2", "--minutes", "0.15", "--reserve-s", "3",
-                              "--grace-s", "1", "--min-start-s", "1"))
+    script = _after_ready(_script(), m["ready"])
+    rc = script.main(_argv(m, "--grids", "ordering-cpu", "depth_formulation-cpu", "control_sem-cpu",
+                           "--jobs", "5", "--lanes", "2", "--minutes", "0.15", "--reserve-s", "3",
+                           "--grace-s", "1", "--min-start-s", "1"))
     took = time.monotonic() - t0
     calls = _calls(m["log"])
     assert rc == 0 and took < 30
@@ -207,7 +230,8 @@ def test_every_gpu_cell_renders_with_gsplat_on_cuda_and_has_its_own_run_id(tmp_p
 def test_no_publish_once_the_budget_is_spent(machine, monkeypatch):
     m = machine
     monkeypatch.setenv("FAKE_STUBBORN", "control_sem-cpu")
-    rc = _script().main(_argv(m, "--grids", "control_sem-cpu", "--minutes", "0.05", "--reserve-s", "0.5",
-                              "--grace-s", "1", "--min-start-s", "0"))     # killed at 3.5 s, after the 3 s budget
+    script = _after_ready(_script(), m["ready"])
+    rc = script.main(_argv(m, "--grids", "control_sem-cpu", "--minutes", "0.05", "--reserve-s", "0.5",
+                           "--grace-s", "1", "--min-start-s", "0"))     # killed at 3.5 s, after the 3 s budget
     assert rc == 1 and not any("publish" in c["argv"] for c in _calls(m["log"]))
     assert "control_sem-cpu: 2 finished cells not published" in (m["runs"] / "gpu_claims.log").read_text()
