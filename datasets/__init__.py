@@ -2,6 +2,7 @@
 synthetic scene generator (`gsbench.datasets.synthetic`) and depth-noise injection
 (`gsbench.datasets.noise`)."""
 from .base import LabelObject, Scene
-from .loader import LAYOUTS, detect_layout, load_scene, scene_fingerprint
+from .layout_registry import layout_names
+from .loader import detect_layout, load_scene, scene_fingerprint
 
-__all__ = ["LAYOUTS", "LabelObject", "Scene", "detect_layout", "load_scene", "scene_fingerprint"]
+__all__ = ["LabelObject", "Scene", "detect_layout", "layout_names", "load_scene", "scene_fingerprint"]

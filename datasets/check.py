@@ -1,7 +1,7 @@
 """`check_folder`: read a scene folder as training and evaluation would, and list every problem.
 
 The first thing to run on a downloaded dataset (`gsbench data check PATH`). It goes through the
-loader's own readers (layout detection, the camera readers, the 3D-OVS and LERF-OVS label readers,
+loader's own readers (layout detection, the registered layout's camera reader and its label checks,
 the synthetic-scene reader) part by part, decodes every image whole and reads every label file
 eagerly, where a run reads them lazily. A problem is recorded as one line naming the file, and the
 check goes on with the next file or part, so one run lists every bad file instead of the first.
@@ -18,7 +18,8 @@ from gsbench.errors import InputError
 from . import ovs
 from .guard import CameraProblems
 from .imageio import image_size, list_images, read_gray, read_rgb
-from .loader import LAYOUTS, SYNTHETIC_META, _attach_synthetic, _base_scene, detect_layout, load_scene
+from .layout_registry import AUTO, Layout, get_layout
+from .loader import SYNTHETIC_META, _attach_synthetic, _base_scene, detect_layout, load_scene
 
 
 @dataclass
@@ -110,7 +111,7 @@ def _views(root: Path, layout: str, rep: FolderReport):
     return None, names, sizes
 
 
-def _check_3dovs(root: Path, names: list[str], sizes: list, rep: FolderReport) -> None:
+def check_3dovs_labels(root: Path, names: list[str], sizes: list, rep: FolderReport) -> None:
     seg_dir = root / "segmentations"
     try:
         classes = ovs.read_classes(seg_dir)
@@ -141,7 +142,7 @@ def _check_3dovs(root: Path, names: list[str], sizes: list, rep: FolderReport) -
         rep.facts.append(f"  view {i:3d} {names[i]}: {len(got)}/{len(classes)} class masks {_sizes_text(got)}")
 
 
-def _check_lerf(root: Path, names: list[str], sizes: list, rep: FolderReport) -> None:
+def check_lerf_labels(root: Path, names: list[str], sizes: list, rep: FolderReport) -> None:
     ldir = ovs.find_label_dir(root)
     if ldir is None:
         rep.problems.append(f"{root / 'label'}: no LERF-OVS label files (label/{root.name}/frame_XXXXX.json)")
@@ -188,6 +189,38 @@ def _check_synthetic(root: Path, scene, rep: FolderReport) -> None:
                      f"split {len(scene.train_ids)} train / {len(scene.test_ids)} test")
 
 
+def check_kaolin(root: Path, rep: FolderReport) -> None:
+    """The kaolin layout's own check: its reader, then every view's class map."""
+    try:
+        s = load_scene(root, "kaolin")
+    except InputError as e:
+        _record(rep, e)
+        return
+    sizes = [(c.width, c.height) for c in s.cameras]
+    rep.facts.append(f"views     {len(sizes)} images, {_sizes_text(sizes)}")
+    rep.facts.append(f"poses     {len(sizes)} from {s.meta.get('poses_from', '?')}")
+    rep.facts.append("points    none (training starts from random points)")
+    rep.facts.append(f"classes   {len(s.class_names)}: {', '.join(s.class_names)} "
+                     f"(every view labelled: views/<i>_semantic.png)")
+    for i in range(len(s.cameras)):
+        try:
+            s.gt_classes(i)
+        except InputError as e:
+            rep.problems.append(str(e))
+
+
+def _check_read(root: Path, layout: Layout, rep: FolderReport) -> None:
+    """A layout with a reader only (a plugin's): read the folder whole and decode every image."""
+    try:
+        scene = load_scene(root, layout.name)
+    except InputError as e:
+        _record(rep, e)
+        return
+    sizes = [(c.width, c.height) for c in scene.cameras]
+    rep.facts.append(f"views     {len(sizes)} images, {_sizes_text(sizes)}")
+    _decode_all(scene.image_paths, sizes, rep)
+
+
 def check_folder(path: str | Path, layout: str = "auto") -> FolderReport:
     """Every fact and problem of a scene folder (see the module docstring); never raises on bad data."""
     root = Path(path)
@@ -195,39 +228,23 @@ def check_folder(path: str | Path, layout: str = "auto") -> FolderReport:
     if not root.is_dir():
         rep.problems.append(f"{root}: scene folder not found")
         return rep
-    if layout not in LAYOUTS:
-        raise InputError(f"unknown layout {layout!r}; choose one of {', '.join(LAYOUTS)}")
-    layout = "3dovs+lerf" if layout == "both" else layout
+    asked = None if layout == AUTO else get_layout(layout)
     try:
-        layout = detect_layout(root) if layout == "auto" else layout
+        lay = asked or get_layout(detect_layout(root))
     except InputError as e:
         rep.problems.append(str(e))
         return rep
-    rep.layout = layout
-    rep.facts.append(f"layout    {layout}")
-    if layout == "kaolin":
-        try:
-            s = load_scene(root, "kaolin")
-        except InputError as e:
-            _record(rep, e)
-            return rep
-        sizes = [(c.width, c.height) for c in s.cameras]
-        rep.facts.append(f"views     {len(sizes)} images, {_sizes_text(sizes)}")
-        rep.facts.append(f"poses     {len(sizes)} from {s.meta.get('poses_from', '?')}")
-        rep.facts.append("points    none (training starts from random points)")
-        rep.facts.append(f"classes   {len(s.class_names)}: {', '.join(s.class_names)} "
-                         f"(every view labelled: views/<i>_semantic.png)")
-        for i in range(len(s.cameras)):
-            try:
-                s.gt_classes(i)
-            except InputError as e:
-                rep.problems.append(str(e))
+    rep.layout = lay.name
+    rep.facts.append(f"layout    {lay.name}")
+    if lay.check is not None:
+        lay.check(root, rep)
         return rep
-    scene, names, sizes = _views(root, layout, rep)
-    if names and layout in ("3dovs", "3dovs+lerf"):
-        _check_3dovs(root, names, sizes, rep)
-    if names and layout in ("lerf", "3dovs+lerf"):
-        _check_lerf(root, names, sizes, rep)
-    if (root / SYNTHETIC_META).is_file():
+    if lay.cameras is None:
+        _check_read(root, lay, rep)
+        return rep
+    scene, names, sizes = _views(root, lay.name, rep)
+    for check in lay.label_checks if names else ():
+        check(root, names, sizes, rep)
+    if lay.extras and (root / SYNTHETIC_META).is_file():
         _check_synthetic(root, scene, rep)
     return rep

@@ -1,13 +1,14 @@
-"""`load_scene`: detect the layout of a scene folder and build a `Scene` in the OpenCV convention.
+"""`load_scene`: read a scene folder in its layout and build a `Scene` in the OpenCV convention.
 
-Layouts (`layout=`): colmap, llff, nerf, 3dovs, lerf, 3dovs+lerf (alias both), kaolin, auto.
-Cameras come from, in order of preference:
+Layouts are registered (`gsbench.datasets.layout_registry`; the built-ins in `builtin_layout.py`):
+colmap, llff, nerf, 3dovs, lerf, 3dovs+lerf (alias both), kaolin; `auto` detects one. This module holds
+the built-ins' readers. Cameras come from, in order of preference:
   colmap -> sparse/0 (or sparse/ or the folder); llff -> poses_bounds.npy; nerf -> transforms*.json;
   3dovs -> poses_bounds.npy (the 3D-OVS protocol), else COLMAP; lerf / both -> COLMAP, else
   transforms.json, else poses_bounds.npy. Sparse points come from a COLMAP model whenever one exists.
 A gsbench synthetic scene (`gsbench_scene.json`) adds GT depth, instances, removal renders and its
-explicit split to whichever layout is read. Split: explicit lists when the layout has them, else the
-LLFF hold-out (index % 8 == 0 -> test).
+explicit split to whichever layout is read (unless the layout says otherwise). Split: explicit lists
+when the layout has them, else the LLFF hold-out (index % 8 == 0 -> test).
 """
 from __future__ import annotations
 
@@ -22,39 +23,29 @@ from gsbench.errors import InputError
 
 from . import colmap as colmap_io
 from . import kaolin as kaolin_io
+from . import layout_registry, ovs
 from . import llff as llff_io
 from . import nerf as nerf_io
-from . import ovs
 from .base import Scene
 from .guard import inside_scene
 from .imageio import image_size, list_images, read_gray, read_npy, read_rgb
 
-LAYOUTS = ("auto", "colmap", "llff", "nerf", "3dovs", "lerf", "3dovs+lerf", "both", "kaolin")
 SYNTHETIC_META = "gsbench_scene.json"
 LLFF_HOLD = 8
 
 
 # ------------------------------------------------------------------------------------ detection
 def detect_layout(root: Path) -> str:
-    root = Path(root)
-    if kaolin_io.is_kaolin(root):
-        return "kaolin"
-    has_ovs = (root / "segmentations" / "classes.txt").is_file()
-    has_lerf = ovs.find_label_dir(root) is not None
-    if has_ovs and has_lerf:
-        return "3dovs+lerf"
-    if has_ovs:
-        return "3dovs"
-    if has_lerf:
-        return "lerf"
-    if colmap_io.find_model_dir(root) is not None:
-        return "colmap"
-    if (root / "poses_bounds.npy").is_file():
-        return "llff"
-    if (root / "transforms.json").is_file() or (root / "transforms_train.json").is_file():
-        return "nerf"
-    raise InputError(f"{root}: unknown scene layout (looked for views/*_rgb.png, segmentations/classes.txt, "
-                     "label/<scene>/frame_*.json, sparse/0, poses_bounds.npy, transforms.json)")
+    """The layout a folder is in: the first registered layout, in priority order, that recognises it."""
+    return layout_registry.detect_layout(root)
+
+
+def has_3dovs(root: Path) -> bool:
+    return (root / "segmentations" / "classes.txt").is_file()
+
+
+def has_lerf(root: Path) -> bool:
+    return ovs.find_label_dir(root) is not None
 
 
 def llff_split(n: int, hold: int = LLFF_HOLD) -> tuple[list[int], list[int]]:
@@ -110,37 +101,62 @@ def _points_if_any(root: Path):
     return points, colors
 
 
-def _base_scene(root: Path, layout: str) -> Scene:
-    points = colors = None
-    train = test = None
-    if layout == "colmap":
-        cams, paths, points, colors, meta = _from_colmap(root)
-    elif layout == "llff":
+def poses_colmap(root: Path) -> tuple:
+    """(cameras, image paths, points, colours, train ids, test ids, meta) of a COLMAP folder; the
+    `poses_*` readers share this shape (None where a part is absent)."""
+    cams, paths, points, colors, meta = _from_colmap(root)
+    return cams, paths, points, colors, None, None, meta
+
+
+def poses_llff(root: Path) -> tuple:
+    cams, paths, meta = _from_llff(root)
+    return cams, paths, None, None, None, None, meta
+
+
+def poses_nerf(root: Path) -> tuple:
+    cams, paths, train, test, meta = nerf_io.read_transforms(root)
+    return cams, paths, None, None, train, test, meta
+
+
+def poses_3dovs(root: Path) -> tuple:
+    """poses_bounds.npy (the 3D-OVS protocol) with a COLMAP model's points when there is one, else COLMAP."""
+    if (root / "poses_bounds.npy").is_file():
         cams, paths, meta = _from_llff(root)
-    elif layout == "nerf":
-        cams, paths, train, test, meta = nerf_io.read_transforms(root)
-    elif layout == "3dovs":
-        if (root / "poses_bounds.npy").is_file():
-            cams, paths, meta = _from_llff(root)
-            points, colors = _points_if_any(root)
-        else:
-            cams, paths, points, colors, meta = _from_colmap(root)
-    else:  # lerf, 3dovs+lerf
-        if colmap_io.find_model_dir(root) is not None:
-            cams, paths, points, colors, meta = _from_colmap(root)
-        elif (root / "transforms.json").is_file():
-            cams, paths, train, test, meta = nerf_io.read_transforms(root)
-        elif (root / "poses_bounds.npy").is_file():
-            cams, paths, meta = _from_llff(root)
-        else:
-            raise InputError(f"{root}: no poses (sparse/0, transforms.json or poses_bounds.npy)")
-    if train is None:
-        train, test = llff_split(len(cams))
-        meta["split"] = f"llff-hold-{LLFF_HOLD}"
-    loader = _ImageLoader(cams, paths)
-    return Scene(name=root.name, path=str(root), layout=layout, cameras=cams, train_ids=train, test_ids=test,
-                 image_paths=[str(p) for p in paths], points=points, point_colors=colors,
-                 extent=camera_extent(cams), image_loader=loader, meta=meta)
+        points, colors = _points_if_any(root)
+        return cams, paths, points, colors, None, None, meta
+    return poses_colmap(root)
+
+
+def poses_labelled(root: Path) -> tuple:
+    """A LERF-OVS scene's cameras: COLMAP, else transforms.json, else poses_bounds.npy."""
+    if colmap_io.find_model_dir(root) is not None:
+        return poses_colmap(root)
+    if (root / "transforms.json").is_file():
+        return poses_nerf(root)
+    if (root / "poses_bounds.npy").is_file():
+        return poses_llff(root)
+    raise InputError(f"{root}: no poses (sparse/0, transforms.json or poses_bounds.npy)")
+
+
+def camera_scene(poses, layout: str):
+    """A layout's camera reader: folder -> Scene named `layout` from a `poses_*` reader."""
+    def read(root: Path) -> Scene:
+        cams, paths, points, colors, train, test, meta = poses(root)
+        if train is None:
+            train, test = llff_split(len(cams))
+            meta["split"] = f"llff-hold-{LLFF_HOLD}"
+        loader = _ImageLoader(cams, paths)
+        return Scene(name=root.name, path=str(root), layout=layout, cameras=cams, train_ids=train, test_ids=test,
+                     image_paths=[str(p) for p in paths], points=points, point_colors=colors,
+                     extent=camera_extent(cams), image_loader=loader, meta=meta)
+    return read
+
+
+def _base_scene(root: Path, layout: str) -> Scene:
+    """The cameras and images of a folder in a registered layout (no labels; `gsbench data check` reads
+    the parts one at a time)."""
+    lay = layout_registry.get_layout(layout)
+    return lay.cameras(root) if lay.cameras is not None else lay.load(root)
 
 
 class _ImageLoader:
@@ -155,7 +171,7 @@ class _ImageLoader:
 
 
 # ------------------------------------------------------------------------------------ optional parts
-def _attach_3dovs(scene: Scene, root: Path) -> None:
+def attach_3dovs(scene: Scene, root: Path) -> None:
     seg_dir = root / "segmentations"
     names = ovs.read_classes(seg_dir)
     files = ovs.scan_segmentations(seg_dir, names, len(scene.cameras))
@@ -174,7 +190,7 @@ def _attach_3dovs(scene: Scene, root: Path) -> None:
     scene.semantic_view_ids = sorted(files)
 
 
-def _attach_lerf(scene: Scene, root: Path) -> None:
+def attach_lerf(scene: Scene, root: Path) -> None:
     ldir = ovs.find_label_dir(root)
     if ldir is None:
         raise InputError(f"{root}: no LERF-OVS labels (label/{root.name}/frame_XXXXX.json)")
@@ -250,7 +266,7 @@ def _attach_synthetic(scene: Scene, root: Path) -> None:
     scene.meta["depth_format"] = "float32 .npy, camera-space z, 0 where no surface"
 
 
-def _kaolin_scene(root: Path) -> Scene:
+def kaolin_scene(root: Path) -> Scene:
     cams, rgbs, sems = kaolin_io.read_kaolin(root)
     sizes = [(c.width, c.height) for c in cams]
 
@@ -280,19 +296,10 @@ def load_scene(path: str | Path, layout: str = "auto") -> Scene:
     root = Path(path)
     if not root.is_dir():
         raise InputError(f"{root}: scene folder not found")
-    if layout not in LAYOUTS:
-        raise InputError(f"unknown layout {layout!r}; choose one of {', '.join(LAYOUTS)}")
-    if layout == "both":
-        layout = "3dovs+lerf"
-    if layout == "auto":
-        layout = detect_layout(root)
-    if layout == "kaolin":
-        return _kaolin_scene(root)
-    scene = _base_scene(root, layout)
-    if layout in ("3dovs", "3dovs+lerf"):
-        _attach_3dovs(scene, root)
-    if layout in ("lerf", "3dovs+lerf"):
-        _attach_lerf(scene, root)
+    lay = layout_registry.get_layout(detect_layout(root) if layout == layout_registry.AUTO else layout)
+    scene = lay.load(root)
+    if not lay.extras:
+        return scene
     if (root / SYNTHETIC_META).is_file():
         _attach_synthetic(scene, root)
     _settle_extent(scene)

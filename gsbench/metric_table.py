@@ -26,6 +26,9 @@ REMOVAL_METRICS = ("removal_residual", "removal_psnr_outside")
 # depth_absrel counts an empty pixel as an error of 1; the covered-pixel error and the coverage beside it
 # tell a wrong depth from a missing surface (gsbench/evaluation/depth.py)
 DEPTH_METRICS = ("depth_absrel", "depth_absrel_covered", "depth_coverage")
+# the 3d-points protocol: labelled surface points of a synthetic scene classed through their nearest Gaussian
+# (gsbench/evaluation/points3d.py); mIoU and mAcc over the classes present among the points
+POINTS3D_METRICS = ("miou_3d", "macc_3d")
 ORDERING_METRICS = ("ordering_adjacent_distance", "ordering_adjacent_mask_iou", "ordering_adjacent_mask_iou_strict",
                     "ordering_adjacent_mask_iou_flow")
 # what the method was given to work with, read from its train summary: the share of pixels the L_ds edge
@@ -35,13 +38,17 @@ TIMING_NAMES = ("train_s", "eval_s", "render_ms")
 MEMORY_NAMES = ("peak_rss_mb", "train_peak_rss_mb", "peak_cuda_mb", "train_peak_cuda_mb", "eval_peak_cuda_mb")
 
 
+# protocol name -> its key in metric names, where they differ (e.g. "3d-points": "3d")
+SEG_KEYS: dict[str, str] = {}
+
+
 def seg_metric(base: str, protocol: str, mode: Optional[str] = None, frame_set: str = "reference") -> str:
     """Name of a segmentation metric, e.g. ("miou", "lerf", "decode", "held-out") -> miou_lerf_decode_heldout."""
     if protocol not in SEG_BASES or base not in SEG_BASES[protocol]:
         raise ValueError(f"no segmentation metric {base!r} for protocol {protocol!r}")
     if mode is not None and mode not in QUERY_MODES:
         raise ValueError(f"query mode must be one of {QUERY_MODES}, got {mode!r}")
-    return f"{base}_{protocol}" + (f"_{mode}" if mode else "") + FRAME_SET_SUFFIX[frame_set]
+    return f"{base}_{SEG_KEYS.get(protocol, protocol)}" + (f"_{mode}" if mode else "") + FRAME_SET_SUFFIX[frame_set]
 
 
 def _seg_names() -> tuple[str, ...]:
@@ -51,9 +58,10 @@ def _seg_names() -> tuple[str, ...]:
 
 #: every name `metrics` may hold, in report order
 METRIC_NAMES: tuple[str, ...] = (IMAGE_METRICS + _seg_names() + MASK_FOLDER_METRICS + REMOVAL_METRICS
-                                 + ORDERING_METRICS + DEPTH_METRICS + INPUT_METRICS)
-#: every quantity a collected row may carry (metrics, timings, memory)
-KNOWN_METRICS: frozenset[str] = frozenset(METRIC_NAMES + TIMING_NAMES + MEMORY_NAMES)
+                                 + ORDERING_METRICS + DEPTH_METRICS + INPUT_METRICS + POINTS3D_METRICS)
+#: every quantity a collected row may carry (metrics, timings, memory); a registered protocol adds its names
+#: (`add_segmentation_protocol`)
+KNOWN_METRICS: set[str] = set(METRIC_NAMES + TIMING_NAMES + MEMORY_NAMES)
 
 
 @dataclass(frozen=True)
@@ -94,6 +102,8 @@ METRICS: dict[str, MetricSpec] = {
     "depth_absrel_covered": MetricSpec("Depth AbsRel, covered px (%)", "Depth AbsRel covered (\\%)", "lower",
                                        100.0, 2),
     "depth_coverage": _pct("Depth coverage"),
+    "miou_3d": _pct("3D mIoU"),
+    "macc_3d": _pct("3D mAcc"),
     "ordering_adjacent_distance": MetricSpec("Adjacent pose distance", "Adjacent Pose Distance", "lower", 1.0, 3),
     "ordering_adjacent_mask_iou": _pct("Adjacent mask IoU (shared ids)"),
     "ordering_adjacent_mask_iou_strict": _pct("Adjacent mask IoU (strict)"),
@@ -123,6 +133,31 @@ METRICS.setdefault("mbiou_lerf", _pct("mBIoU"))
 METRICS.setdefault("eval_peak_cuda_mb", MetricSpec("Peak CUDA memory, eval (MB)", "Peak VRAM eval (MB)", "lower",
                                                    1.0, 0))
 
+
+def add_segmentation_protocol(protocol: str, key: str, bases: tuple[str, ...]) -> None:
+    """Enter a protocol's metric names (its bases x query modes x frame sets) in this table: the hook the
+    evaluation's protocol registry calls, so a protocol added as one file (or a plugin's) writes names
+    that results.json accepts. A protocol already here must declare the same bases."""
+    if protocol in SEG_BASES:
+        if tuple(SEG_BASES[protocol]) != tuple(bases) or SEG_KEYS.get(protocol, protocol) != key:
+            raise ValueError(f"protocol {protocol!r} declares metrics {tuple(bases)} under {key!r}; the metric "
+                             f"table has {tuple(SEG_BASES[protocol])} under {SEG_KEYS.get(protocol, protocol)!r}")
+        return
+    taken = {SEG_KEYS.get(p, p) for p in SEG_BASES}
+    if key in taken or not key.replace("_", "").isalnum():
+        raise ValueError(f"protocol {protocol!r}: metric key {key!r} is taken or not letters, digits and '_'")
+    SEG_BASES[protocol] = tuple(bases)
+    if key != protocol:
+        SEG_KEYS[protocol] = key
+    for b in bases:
+        for m in (None, *QUERY_MODES):
+            for f in FRAME_SETS:
+                name = seg_metric(b, protocol, m, f)
+                label = _SEG_LABEL.get(b, b) + (f" {m}" if m else "") + (" held-out" if f == "held-out" else "")
+                METRICS.setdefault(name, _pct(label))
+                KNOWN_METRICS.add(name)
+
+
 LOGICAL_SPEC = {
     "miou": _pct("mIoU"),
     "mbiou": _pct("mBIoU"),
@@ -131,4 +166,5 @@ LOGICAL_SPEC = {
 
 __all__ = ["MetricSpec", "METRICS", "LOGICAL_SPEC", "METRIC_NAMES", "KNOWN_METRICS", "SEG_BASES", "FRAME_SETS",
            "FRAME_SET_SUFFIX", "IMAGE_METRICS", "MASK_FOLDER_METRICS", "REMOVAL_METRICS", "DEPTH_METRICS",
-           "ORDERING_METRICS", "INPUT_METRICS", "TIMING_NAMES", "MEMORY_NAMES", "seg_metric"]
+           "ORDERING_METRICS", "INPUT_METRICS", "POINTS3D_METRICS", "TIMING_NAMES", "MEMORY_NAMES", "seg_metric",
+           "SEG_KEYS", "add_segmentation_protocol"]

@@ -40,7 +40,7 @@ from gsbench.priors import get_feature_provider, prepare_priors
 from gsbench.render import RenderOutput, render, resolve_backend
 from gsbench.store import load_torch, save_torch_atomic
 from gsbench.train.autoencoder import FeatureAutoencoder
-from gsbench.train.feature_blocks import FeatureBlocks
+from gsbench.train.feature_blocks import BLOCK_ROWS, FeatureBlocks
 from gsbench.train.render_backend import prepare_backend, resolve_render_backend
 from gsbench.train.trainer import Trainer
 
@@ -150,6 +150,18 @@ class Method:
         feats = self.render(camera).features
         return {m: FeatureBlocks.of_map(feats, None if m == "encode" else self._decode_rows) for m in modes}
 
+    def gaussian_semantic_features(self, mode: str = "encode") -> Optional[torch.Tensor]:
+        """(N, D) each Gaussian's own semantic feature in the space of `embed_text(texts, mode)`
+        (encode: its latent; decode: the latent decoded to the text space, BLOCK_ROWS at a time), or
+        None without semantics: what the 3D point-level protocol classifies (docs/protocols.md)."""
+        _check_mode(mode)
+        if not self.has_semantics:
+            return None
+        lat = self._require_field().features
+        if mode == "encode" or lat.shape[0] == 0:
+            return lat
+        return torch.cat([self._decode_rows(lat[k:k + BLOCK_ROWS]) for k in range(0, lat.shape[0], BLOCK_ROWS)])
+
     def _decode_rows(self, rows: torch.Tensor) -> torch.Tensor:
         """(n, d) latents -> (n, 512) decoded unit features."""
         with torch.no_grad():
@@ -166,12 +178,24 @@ class Method:
         _check_mode(mode)
         if not self.has_semantics:
             return None
-        t = torch.as_tensor(np.asarray(self.feature_provider().encode_text(list(texts)), dtype=np.float32),
-                            device=self.device)
+        t = self._provider_text(texts)
         if mode == "decode":
             return _unit(t)
         with torch.no_grad():
             return self.autoencoder.encode(t)
+
+    def _provider_text(self, texts: list[str]) -> torch.Tensor:
+        """(Q, 512) the feature provider's text embeddings, on the method's device."""
+        return torch.as_tensor(np.asarray(self.feature_provider().encode_text(list(texts)), dtype=np.float32),
+                               device=self.device)
+
+    def _unit_provider_text(self, texts: list[str], mode: str) -> Optional[torch.Tensor]:
+        """`embed_text` of a method without an autoencoder: (Q, 512) unit text embeddings of the feature
+        provider, the same in both modes (None without semantics)."""
+        _check_mode(mode)
+        if not self.has_semantics:
+            return None
+        return _unit(self._provider_text(texts))
 
     def with_field(self, field: GaussianField) -> "Method":
         """This method with another field, everything else shared (config, autoencoder, providers, info):

@@ -35,7 +35,7 @@ import torch
 from gsbench.config import setting
 from gsbench.errors import InputError
 from gsbench.gaussians import SH_C0
-from gsbench.methods.base import Method, Phases, _check_mode, _unit, fit_priors
+from gsbench.methods.base import Method, Phases, _check_mode, fit_priors
 from gsbench.methods.grouping_spec import budget
 from gsbench.methods.registry import uses
 from gsbench.train.adam import Adam
@@ -149,13 +149,17 @@ class GaussianGrouping(Method):
         blocks = FeatureBlocks.of_map(self.render(camera).features, lambda ids: self.table[self.classify(ids)])
         return {m: blocks for m in modes}
 
-    def embed_text(self, texts: list[str], mode: str = "encode") -> Optional[torch.Tensor]:
-        """(Q, 512) unit text embeddings of the feature provider (both modes: the tracks' feature space)."""
+    def gaussian_semantic_features(self, mode: str = "encode") -> Optional[torch.Tensor]:
+        """(N, 512) the feature of the track each Gaussian's own identity encoding classifies into (both
+        modes; zero for class 0 and for classes no track owns)."""
         _check_mode(mode)
         if not self.has_semantics:
             return None
-        t = np.asarray(self.feature_provider().encode_text(list(texts)), dtype=np.float32)
-        return _unit(torch.as_tensor(t, device=self.device))
+        return self.table[self.classify(self.field.features)]
+
+    def embed_text(self, texts: list[str], mode: str = "encode") -> Optional[torch.Tensor]:
+        """(Q, 512) unit text embeddings of the feature provider (both modes: the tracks' feature space)."""
+        return self._unit_provider_text(texts, mode)
 
     def query_classes(self, text: str) -> list[int]:
         """The classes (tracks) a text query selects: those whose track feature has the highest cosine."""

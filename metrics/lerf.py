@@ -221,6 +221,25 @@ def _localized(avg: list[np.ndarray], bboxes: Any) -> bool:
     return False
 
 
+LOCALIZATION_RULES = ("langsplat", "original")   # the LERF protocol's forks differ only in this rule
+
+
+def lerf_localization_original(relevancy_levels: Any, bboxes: Any) -> bool:
+    """The original LERF's rule: the one highest-relevancy pixel of the raw (unfiltered) map, of the
+    level with the largest maximum (first level on ties), the first such pixel in row-major order
+    (np.argmax), is a hit when it lies inside any box [x1, y1, x2, y2] (bounds inclusive)."""
+    maps = _levels(relevancy_levels, "relevancy")
+    boxes = finite_float(bboxes, "gt bboxes").reshape(-1, 4)
+    if boxes.shape[0] == 0:
+        raise InputError("gt bboxes: no box given for localization")
+    r = maps[select_level(maps)]
+    y, x = np.unravel_index(int(np.argmax(r)), r.shape)
+    for x1, y1, x2, y2 in boxes:
+        if min(x1, x2) <= x <= max(x1, x2) and min(y1, y2) <= y <= max(y1, y2):
+            return True
+    return False
+
+
 @dataclass
 class LerfPair:
     """One (frame, query) of a scene. relevancy: raw r per level, (L, H, W) or a list of (H, W),
@@ -250,7 +269,7 @@ class LerfSceneResult:
 
 def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_THRESHOLD,
                         missing: str = "error", window: str = "langsplat",
-                        kernels: LerfKernels = LerfKernels()) -> LerfSceneResult:
+                        kernels: LerfKernels = LerfKernels(), localization: str = "langsplat") -> LerfSceneResult:
     """The whole per-scene LERF-OVS protocol.
 
     missing: what a pair without a prediction does. "error" (default) raises InputError naming
@@ -261,9 +280,12 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
     its mean NaN) IoU 1, the rule `eval --masks` applies too (EMPTY_GT_RULE). Such pairs carry
     "empty_gt": True. A pair without a GT mask gets no IoU and is listed in `skipped`; its
     localization still counts when it has boxes. A pair with neither a mask nor boxes is an InputError.
+    localization: "langsplat" (the argmax of the box-filtered map) or "original" (`lerf_localization_original`).
     """
     if missing not in MISSING_POLICIES:
         raise InputError(f"missing must be one of {MISSING_POLICIES}, got {missing!r}")
+    if localization not in LOCALIZATION_RULES:
+        raise InputError(f"localization must be one of {LOCALIZATION_RULES}, got {localization!r}")
     per_pair: list[dict] = []
     skipped: list[dict] = []
     ious: list[float] = []
@@ -305,7 +327,8 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
                 entry["empty_gt"] = True
             ious.append(entry["iou"])
         if has_boxes:
-            entry["localized"] = _localized(avg, p.gt_bboxes)
+            entry["localized"] = (_localized(avg, p.gt_bboxes) if localization == "langsplat"
+                                  else lerf_localization_original(maps, p.gt_bboxes))
             hits.append(1.0 if entry["localized"] else 0.0)
         per_pair.append(entry)
     return LerfSceneResult(
@@ -313,4 +336,5 @@ def evaluate_lerf_scene(pairs: Sequence[LerfPair], *, threshold: float = LERF_TH
         n_pairs=len(pairs), n_iou=len(ious), n_loc=len(hits), missing=missing, impl=LERF_IMPL + kernels.tag,
         params={"threshold": threshold, "window": window, "blend_kernel": kernels.blend,
                 "majority_window": 2 * kernels.radius + 1,
-                "temperature": LERF_TEMPERATURE, "negatives": list(CANONICAL_NEGATIVES)})
+                "temperature": LERF_TEMPERATURE, "negatives": list(CANONICAL_NEGATIVES),
+                "localization": localization})

@@ -204,3 +204,92 @@ def evaluate_ovs3d_scene(views: Sequence[Ovs3dView], class_names: Sequence[str],
                             params={"dilation_ratio": dilation_ratio, "empty_union": EMPTY_UNION_IOU,
                                     "empty_gt_rule": EMPTY_GT_RULE, "gt_resize": "nearest-centre"},
                             empty_both=sum(len(v["empty_both"]) for v in per_view))
+
+
+# ---------------------------------------------------------------------------- the protocol's forks
+# The default fork ("3dovs-closed-set") is everything above: one class per pixel by the argmax over the
+# scene's classes. The forks below give each class query its own mask, which may overlap or leave pixels
+# unclassed, so they have no pixel accuracy; their IoU / BIoU follow the same empty-class rule.
+THRESHOLD_IMPL = "3dovs/per-query-threshold-langsplat/v1"
+DYNAMIC_IMPL = "3dovs/per-query-dynamic-threshold/v1"
+DYNAMIC_STABILITY = 0.4       # least stability of an accepted threshold
+DYNAMIC_AREA = (0.005, 0.9)   # least and largest share of the image an accepted mask covers
+DYNAMIC_STEP = 0.05           # candidate thresholds 0.05, 0.10, ..., 0.95 of the normalised relevancy
+
+
+def _normalised(relevancy: Any) -> np.ndarray:
+    r = finite_float(relevancy, "relevancy")
+    if r.ndim != 2:
+        raise InputError(f"relevancy: expected (H, W), got shape {r.shape}")
+    lo, hi = float(r.min()), float(r.max())
+    return (r - lo) / (hi - lo + 1e-9)
+
+
+def dynamic_threshold(relevancy: Any, *, stability: float = DYNAMIC_STABILITY,
+                      area: tuple[float, float] = DYNAMIC_AREA, step: float = DYNAMIC_STEP) -> float | None:
+    """The threshold the dynamic rule picks for one query's relevancy map (H, W), or None.
+
+    x = min-max normalised relevancy. For each candidate t = step, 2 step, ... < 1: the mask x > t covers
+    a share a(t) of the image, and its stability is s(t) = |x > t + step| / |x > t - step| (the IoU of
+    the two nested masks around t; 0 when the wider one is empty). A candidate is accepted when
+    s(t) >= stability and area[0] <= a(t) <= area[1]; the accepted t with the largest s(t) wins (the
+    larger t on ties). None when no candidate is accepted: the query's mask is empty.
+    """
+    x = _normalised(relevancy)
+    n = x.size
+    best, best_s = None, -1.0
+    k = 1
+    while k * step < 1.0 - 1e-12:
+        t = k * step
+        share = float(np.count_nonzero(x > t)) / n if n else 0.0
+        wide = int(np.count_nonzero(x > t - step))
+        s = float(np.count_nonzero(x > t + step)) / wide if wide else 0.0
+        if s >= stability and area[0] <= share <= area[1] and s >= best_s:
+            best, best_s = t, s
+        k += 1
+    return best
+
+
+def dynamic_threshold_mask(relevancy: Any, **rule: Any) -> np.ndarray:
+    """One query's mask under the dynamic rule (`dynamic_threshold`); empty when no threshold is accepted."""
+    x = _normalised(relevancy)
+    t = dynamic_threshold(relevancy, **rule)
+    return np.zeros(x.shape, bool) if t is None else x > t
+
+
+def evaluate_ovs3d_masks(views: Sequence[Ovs3dView], class_names: Sequence[str], *, impl: str,
+                         dilation_ratio: float = BOUNDARY_DILATION_RATIO) -> Ovs3dSceneResult:
+    """The 3D-OVS scene scores of per-class masks: each view's `pred_labels` is a (C, H, W) bool stack
+    (class k's mask, in class_names' order; masks may overlap), never None. IoU and BIoU per (view,
+    class) with the reference's empty-class rule (0 when the GT is empty), plain means over views x
+    classes; pixel accuracy is None (no single class per pixel)."""
+    all_iou: list[float] = []
+    all_biou: list[float] = []
+    per_view: list[dict] = []
+    for v in views:
+        pred = np.asarray(v.pred_labels, dtype=bool)
+        if pred.ndim != 3 or pred.shape[0] != len(class_names):
+            raise InputError(f"3D-OVS view {v.name!r}: expected one mask per class, got shape {pred.shape}")
+        h, w = pred.shape[1:]
+        ious, bious, empty_gt, empty_both = {}, {}, [], []
+        for c, name in enumerate(class_names):
+            gt = (resize_nearest(as_mask(v.gt_masks[name], f"gt mask {name!r}"), w, h) if name in v.gt_masks
+                  else np.zeros((h, w), bool))
+            ious[name] = iou(pred[c], gt, empty=EMPTY_UNION_IOU)
+            bious[name] = boundary_iou(pred[c], gt, dilation_ratio=dilation_ratio, empty=EMPTY_UNION_IOU)
+            if not gt.any():
+                empty_gt.append(name)
+                if not pred[c].any():
+                    empty_both.append(name)
+        vi, vb = [ious[c] for c in class_names], [bious[c] for c in class_names]
+        all_iou.extend(vi)
+        all_biou.extend(vb)
+        per_view.append({"view": v.name, "miou": mean_or_none(vi), "mbiou": mean_or_none(vb), "pixel_acc": None,
+                         "pixel_acc_labelled": None, "iou": ious, "biou": bious, "empty_gt": empty_gt,
+                         "empty_both": empty_both})
+    return Ovs3dSceneResult(miou=mean_or_none(all_iou), mbiou=mean_or_none(all_biou), pixel_acc=None,
+                            pixel_acc_labelled=None, per_view=per_view, skipped=[], n_views=len(views),
+                            missing="error", impl=impl,
+                            params={"dilation_ratio": dilation_ratio, "empty_union": EMPTY_UNION_IOU,
+                                    "empty_gt_rule": EMPTY_GT_RULE, "gt_resize": "nearest-centre"},
+                            empty_both=sum(len(v["empty_both"]) for v in per_view))

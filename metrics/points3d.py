@@ -22,13 +22,14 @@ The protocol that OpenGaussian, Dr. Splat and SceneSplat-Bench score in 3D, in t
 
 Bad input (a shape mismatch, NaN or inf, an out-of-range class or opacity) raises
 `gsbench.errors.InputError` (a ValueError) with a message that names the argument.
-The `3d-points` protocol is not yet wired into `gsbench eval`.
+The `3d-points` protocol (gsbench/evaluation/points3d_protocol.py) wires it into `gsbench eval`.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -124,6 +125,22 @@ def _opacity(opacity: Any, n: int) -> np.ndarray:
     return op
 
 
+@contextlib.contextmanager
+def _denormals_kept() -> Iterator[None]:
+    """Denormal flushing off for the k-d tree, restored after. `import gsbench` turns flushing on for the
+    render (gsbench/__init__.py); with it on, scipy 1.17's cKDTree crashed the process (SIGSEGV) while
+    building a tree of 20,000 points of which 12,000 share the coordinate z = 0 exactly (a floor)."""
+    import torch  # lazy: only to read and set the thread's flag (a core dependency)
+    flushing = float((np.array([1e-310]) * np.float64(1.0))[0]) == 0.0
+    if flushing:
+        torch.set_flush_denormal(False)
+    try:
+        yield
+    finally:
+        if flushing:
+            torch.set_flush_denormal(True)
+
+
 def point_classes(points: Any, gaussian_means: Any, gaussian_class: Any, mode: str = "nearest",
                   radius: float | None = None) -> np.ndarray:
     """Class of every ground-truth point, taken from the classed Gaussians around it.
@@ -166,10 +183,11 @@ def point_classes(points: Any, gaussian_means: Any, gaussian_class: Any, mode: s
     if p.shape[0] == 0 or not np.any(keep):
         return out
     means, cls = means[keep], cls[keep]
-    tree = cKDTree(means)
-    if mode == "nearest":
-        return _nearest(tree, p, means, cls)
-    rows, idx = _pairs(tree.query_ball_point(p, r=float(radius)))
+    with _denormals_kept():
+        tree = cKDTree(means)
+        if mode == "nearest":
+            return _nearest(tree, p, means, cls)
+        rows, idx = _pairs(tree.query_ball_point(p, r=float(radius)))
     if rows.size == 0:
         return out
     votes = np.zeros((p.shape[0], int(cls.max()) + 1), dtype=np.int64)

@@ -79,6 +79,7 @@ def budget_table(res: Results) -> list[Table]:
                     seen[key] = seen.get(key, 0) + 1
             for (it, sem, src, schedule), n in seen.items():
                 sem_text = ("– (no semantic field)" if schedule == "none" else
+                            f"0 ({schedule})" if sem is None and schedule not in (None, "joint", "after rgb") else
                             "n/a (unknown)" if sem is None else
                             f"{sem} (joint)" if schedule == "joint" else str(sem))
                 rows.append(Row(["(standalone)" if st is None else str(st), method_label(meth)],

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 
-from gsbench.datasets import LAYOUTS
 from gsbench.datasets.check import check_folder
 
 
@@ -14,7 +13,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                    "resolution, labelled frames, classes or queries, poses and points, and every "
                                    "problem on one line naming its file. Exit status 1 when there is a problem.")
     p.add_argument("path", help="scene folder")
-    p.add_argument("--layout", default="auto", choices=LAYOUTS, help="layout to read it as (default: detected)")
+    p.add_argument("--layout", default="auto", help="layout to read it as: a registered layout's name "
+                   "(colmap, llff, nerf, 3dovs, lerf, 3dovs+lerf, kaolin, or a plugin's; default: auto, detected)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,4 +1,4 @@
-"""`gsbench eval RUN_DIR [--protocol lerf|3dovs|auto]`, or
+"""`gsbench eval RUN_DIR [--protocol auto|<protocol>|<fork>[,...]]`, or
 `gsbench eval --masks PRED_DIR --layout LAYOUT_DIR --protocol lerf|3dovs [--out OUT_DIR]`."""
 from __future__ import annotations
 
@@ -12,9 +12,10 @@ from gsbench.preview_files import PREVIEWS_DIR, read_manifest
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run_dir", nargs="?", type=Path, help="a trained run folder (writes RUN_DIR/results.json)")
-    parser.add_argument("--protocol", choices=["auto", "lerf", "3dovs"], default=None,
-                        help="segmentation protocol (auto = every protocol the scene supports; "
-                        "default: the run's eval.protocol)")
+    parser.add_argument("--protocol", default=None, metavar="NAME[,NAME]",
+                        help="protocols to score: auto (every protocol the scene supports, each under its default "
+                        "fork), protocol names (3dovs, lerf, ...) or fork names (3dovs-threshold, lerf-original, "
+                        "...; docs/protocols.md), comma-separated; default: the run's eval.protocol")
     parser.add_argument("--masks", type=Path, help="score a folder of predicted masks instead of a run")
     parser.add_argument("--layout", type=Path, help="with --masks: a LERF-OVS label folder (frame_*.json) "
                         "or a 3D-OVS scene folder (segmentations/)")

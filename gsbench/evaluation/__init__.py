@@ -1,7 +1,8 @@
 """Evaluation: a trained run -> results.json (`evaluate_run`), a folder of predicted masks ->
 results.json (`score_mask_folder`). One job per module: frames (which views, at which size),
-labels (ground truth), image (PSNR / SSIM / LPIPS / FPS), segmentation (3D-OVS, LERF-OVS),
-removal, masks (prediction folders), run (the whole run)."""
+labels (ground truth), image (PSNR / SSIM / LPIPS / FPS), segmentation (every registered protocol),
+removal, masks (prediction folders), run (the whole run). The protocols are a registry
+(protocol_registry): one `*_protocol` file each (3D-OVS, LERF-OVS, 3D points) or an entry point."""
 from __future__ import annotations
 
 from .frames import FrameSets, frame_sets

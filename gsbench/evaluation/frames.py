@@ -1,4 +1,4 @@
-"""Frame sets named by protocol, and the camera each set is scored at.
+"""Frame sets named by protocol, and the camera each set is scored at (each protocol's rule: its file).
 
   reconstruction: the held-out test views (every 8th), at the training resolution;
   reference:      the labelled frames that were trained on - what the references score;
@@ -12,6 +12,7 @@ at each label file's size; "train" scores everything at the training resolution.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Callable
 
 from gsbench.camera import training_size
 from gsbench.config import setting
@@ -19,6 +20,8 @@ from gsbench.config_keys import EVAL_RESOLUTIONS as RESOLUTIONS
 from gsbench.datasets.splits import split_ids
 from gsbench.errors import InputError
 from gsbench.metric_table import FRAME_SETS
+
+from .protocol_registry import get_protocol, protocols
 
 
 @dataclass
@@ -35,20 +38,11 @@ class FrameSets:
 
 
 def frame_sets(scene, config: dict) -> FrameSets:
+    """The split's frame sets; `labelled` holds, for each registered protocol the scene supports, the
+    frames it scores (its `frames`)."""
     trained, held = split_ids(scene, config)
-    labelled = {}
-    if scene.has_semantics:
-        labelled["3dovs"] = sorted(i for i in range(len(scene.cameras)) if _has_3dovs(scene, i))
-    if scene.has_labels:
-        labelled["lerf"] = sorted(i for i in range(len(scene.cameras)) if scene.gt_labels(i) is not None)
+    labelled = {p.name: sorted(p.frames(scene)) for p in protocols() if p.supports(scene) is None}
     return FrameSets(trained=trained, reconstruction=held, labelled=labelled)
-
-
-def _has_3dovs(scene, i: int) -> bool:
-    ids = getattr(scene, "semantic_view_ids", None)
-    if ids:
-        return i in ids
-    return scene.gt_classes(i) is not None
 
 
 def view_name(scene, i: int) -> str:
@@ -59,6 +53,17 @@ def train_camera(camera, max_width):
     """The camera at the training resolution (train.max_width, the rule training uses)."""
     w, h = training_size(camera, max_width)
     return camera if (w, h) == (camera.width, camera.height) else camera.resized(w, h)
+
+
+def scoring_camera(scene, i: int, config: dict, size: Callable[[Any], tuple[int, int]]):
+    """The camera view i is scored at: the training resolution under `eval.resolution: train`, else the
+    protocol's own size `size(camera)` -> (w, h) (asked only then)."""
+    res, _ = eval_settings(config)
+    cam = scene.cameras[i]
+    if res == "train":
+        return train_camera(cam, setting(config, "train.max_width"))
+    w, h = size(cam)
+    return cam if (w, h) == (cam.width, cam.height) else cam.resized(w, h)
 
 
 OVS3D_REFERENCE_DOWNSAMPLE = 8     # the 3D-OVS reference scores at int(W / 8) x int(H / 8) of its images
@@ -86,17 +91,8 @@ def ovs3d_downsample(scene, config: dict) -> tuple[int, str]:
 
 
 def segmentation_camera(scene, i: int, protocol: str, config: dict):
-    """The camera view i of `protocol` is scored at (see the module docstring)."""
-    res, _ = eval_settings(config)
-    cam = scene.cameras[i]
-    if res == "train":
-        return train_camera(cam, setting(config, "train.max_width"))
-    if protocol == "lerf":
-        w, h = scene.label_sizes.get(i, (cam.width, cam.height))
-    else:
-        down, _ = ovs3d_downsample(scene, config)
-        w, h = max(1, cam.width // down), max(1, cam.height // down)
-    return cam if (w, h) == (cam.width, cam.height) else cam.resized(w, h)
+    """The camera view i of `protocol` is scored at: the protocol's resolution rule (its `camera`)."""
+    return get_protocol(protocol).camera(scene, i, config)
 
 
 def size_text(cams) -> str:

@@ -36,6 +36,7 @@ from gsbench.store import write_json_atomic
 from .block import Block
 from .labels import label_masks, lerf_label_files, query_file, read_label_file, read_mask
 from .mask_files import check_prediction_size, image_size, read_binary_mask, read_class_map
+from .protocol_registry import Protocol, get_protocol, protocols
 
 log = logging.getLogger(__name__)
 MASK_FOLDER_IMPL = "mask-folder/v3"   # v3: header size rule, mask values read or refused (mask_files)
@@ -54,12 +55,10 @@ def score_mask_folder(pred_dir: str | os.PathLike, layout_dir: str | os.PathLike
     if not layout_dir.is_dir():
         raise InputError(f"{layout_dir}: layout folder not found")
     t0 = time.time()
-    if protocol == "lerf":
-        block, extra = score_lerf_folder(pred_dir, layout_dir, dilation_ratio)
-    elif protocol == "3dovs":
-        block, extra = score_3dovs_folder(pred_dir, layout_dir, dilation_ratio)
-    else:
-        raise InputError(f"mask scoring needs --protocol lerf or 3dovs, got {protocol!r}")
+    scorers = [p.name for p in protocols() if type(p).score_folder is not Protocol.score_folder]
+    if protocol not in scorers:
+        raise InputError(f"mask scoring needs --protocol {' or '.join(scorers)}, got {protocol!r}")
+    block, extra = get_protocol(protocol).score_folder(pred_dir, layout_dir, dilation_ratio)
     identity = {"run_id": None, "method": "external", "scene": layout_dir.name, "scene_path": str(layout_dir),
                 "protocol": protocol, "protocols": [protocol]}
     res = run_results(identity=identity, metrics=block.metrics, metric_impl=block.metric_impl,

@@ -18,13 +18,12 @@ import numpy as np
 
 from gsbench.config import setting
 from gsbench.metrics import image as MI
-from gsbench.metrics import lerf, ovs3d
 from gsbench.preview_files import remove_previews, write_previews
 from gsbench.resize import resize_area, resize_nearest, resize_rgb
 
 from .block import to_numpy
-from .frames import segmentation_camera, view_name
-from .labels import class_masks
+from .frames import view_name
+from .protocol_registry import get_protocol
 from .removal import REMOVAL_IMPL, removal_targets, view_removal_metrics
 from .segmentation import frame_outputs
 
@@ -72,56 +71,14 @@ def _depth_range(depth: np.ndarray, alpha: np.ndarray) -> list[float] | None:
     return [float(np.percentile(d, 2)), float(np.percentile(d, 98))]
 
 
-def _semantics_3dovs(scene, i: int, cam, config: dict, mode: str, pred: np.ndarray) -> tuple:
-    """The preview's queries and masks of 3D-OVS frame i from its predicted class map (H, W)."""
-    classes = list(scene.class_names)
-    gt = class_masks(scene, i, classes, cam.width, cam.height) or {}
-    ratio = float(setting(config, "eval.boundary_dilation_ratio"))
-    m = ovs3d.ovs3d_view_metrics(pred, gt, classes, dilation_ratio=ratio)
-    queries = [{"query": c, "iou": m["iou"][c], "biou": m["biou"][c], "localized": None, "reason": None}
-               for c in classes]
-    gt_masks = [gt.get(c, np.zeros((cam.height, cam.width), bool)) for c in classes]
-    impl = {"iou": f"{ovs3d.OVS3D_IMPL}+query-{mode}"}
-    return queries, [pred == k for k in range(len(classes))], gt_masks, impl
-
-
-def _semantics_lerf(scene, i: int, cam, config: dict, mode: str, scored: tuple) -> tuple:
-    """The preview's queries and masks of LERF frame i from its scored (relevancy (Q, H, W), GT
-    masks, GT boxes)."""
-    rel, masks, boxes = scored
-    names = list(masks)
-    if not names:
-        return [], [], [], {}
-    kernels = lerf.lerf_kernels(cam.width, setting(config, "eval.lerf_kernels"))
-    pairs = [lerf.LerfPair(view_name(scene, i), q, rel[k], masks[q], boxes[q]) for k, q in enumerate(names)]
-    r = lerf.evaluate_lerf_scene(pairs, missing="error", kernels=kernels)
-    by_query = {p["query"]: p for p in r.per_pair}
-    reasons = {s["query"]: s["reason"] for s in r.skipped}
-    queries, preds = [], []
-    for k, q in enumerate(names):
-        blended = lerf.lerf_blend(rel[k], kernels.blend)
-        preds.append(lerf.lerf_mask(blended, radius=kernels.radius))
-        pp = by_query.get(q, {})
-        queries.append({"query": q, "iou": pp.get("iou"), "biou": None, "localized": pp.get("localized"),
-                        "reason": reasons.get(q)})
-    return queries, preds, [masks[q] for q in names], {"iou": f"{r.impl}+query-{mode}"}
-
-
-def _has_prediction(method, protocol: str, mode: str, pred) -> bool:
-    """Whether a `frame_outputs` value comes from a semantic field: a 3D-OVS class map, or LERF
-    relevancy maps (a LERF frame without queries has none either way: ask the method)."""
-    if protocol == "3dovs":
-        return pred is not None
-    rel, masks, _ = pred
-    return rel is not None or (not masks and method.embed_text(["object"], mode) is not None)
-
-
 def frame_preview(method, scene, i: int, protocol: str, frame_set: str, config: dict, mode: str,
-                  max_width: int, scored: Optional[dict] = None) -> tuple[dict, dict]:
-    """(manifest entry, arrays) of labelled view i under `protocol`. scored: evaluation's
-    `frame_outputs` holding (protocol, mode, i), whose predictions are shown (nothing is decoded
-    again); without it the frame's predictions are computed here."""
-    cam = segmentation_camera(scene, i, protocol, config)
+                  max_width: int, scored: Optional[dict] = None, fork: Optional[str] = None) -> tuple[dict, dict]:
+    """(manifest entry, arrays) of labelled view i under `protocol` (and its fork, default when None).
+    scored: evaluation's `frame_outputs` holding (protocol, mode, i), whose predictions are shown
+    (nothing is decoded again); without it the frame's predictions are computed here."""
+    proto = get_protocol(protocol)
+    fork = fork or proto.default_fork
+    cam = proto.camera(scene, i, config)
     out = method.render(cam)
     rgb = np.clip(to_numpy(out.rgb), 0.0, 1.0)
     depth, alpha = to_numpy(out.depth).astype(np.float32), to_numpy(out.alpha).astype(np.float32)
@@ -136,13 +93,12 @@ def frame_preview(method, scene, i: int, protocol: str, frame_set: str, config: 
     gts: list = []
     key = (protocol, mode, i)
     if scored is None or key not in scored:
-        scored = frame_outputs(method, scene, {protocol: [i]}, config, (mode,))
-    pred = scored[key]
-    if not _has_prediction(method, protocol, mode, pred):
+        scored = frame_outputs(method, scene, {protocol: [i]}, config, (mode,), {protocol: fork})
+    shown = proto.preview(method, scene, i, cam, config, mode, scored[key], fork)
+    if shown is None:
         entry["semantic_reason"] = f"method {config.get('method')} has no semantic field"
     else:
-        fn = _semantics_3dovs if protocol == "3dovs" else _semantics_lerf
-        entry["queries"], preds, gts, entry["metric_impl"] = fn(scene, i, cam, config, mode, pred)
+        entry["queries"], preds, gts, entry["metric_impl"] = shown
         if not entry["queries"]:
             entry["semantic_reason"] = "the label file holds no query"
     gt_depth = scene.gt_depth(i)
@@ -210,9 +166,9 @@ def preview_keys(protocols: list[str], sets: dict, config: dict, mode: str) -> s
 
 def save_previews(run_dir: Path, method, scene, protocols: list[str], sets: dict, rec_ids: list[int],
                   rec_cams: list, config: dict, mode: str, identity: dict,
-                  scored: Optional[dict] = None) -> Path | None:
+                  scored: Optional[dict] = None, forks: Optional[dict] = None) -> Path | None:
     """Write run_dir/previews for this evaluation (none, and the old ones deleted, when eval.previews is 0).
-    scored: the evaluation's `frame_outputs`, whose predictions the pictures show."""
+    scored: the evaluation's `frame_outputs`, whose predictions the pictures show; forks: {protocol: fork}."""
     n, max_width = preview_settings(config)
     if n <= 0:
         remove_previews(run_dir)
@@ -220,7 +176,8 @@ def save_previews(run_dir: Path, method, scene, protocols: list[str], sets: dict
     frames, arrays = [], {}
     for p in protocols:
         for i, frame_set in pick_frames(sets[p], n):
-            entry, arrs = frame_preview(method, scene, i, p, frame_set, config, mode, max_width, scored)
+            entry, arrs = frame_preview(method, scene, i, p, frame_set, config, mode, max_width, scored,
+                                        (forks or {}).get(p))
             frames.append(entry)
             arrays[entry["key"]] = arrs
     removal, rarrays, rreason = removal_previews(method, scene, rec_ids, rec_cams, config, n, max_width)

@@ -15,7 +15,7 @@ from gsbench.datasets.splits import split_record
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError
 from gsbench.evaluation.trained_run import load_run
-from gsbench.metric_table import ORDERING_METRICS, SEG_BASES, seg_metric
+from gsbench.metric_table import ORDERING_METRICS
 from gsbench.metrics import ordering as MO
 from gsbench.results import run_results
 from gsbench.runlock import RunLock
@@ -26,8 +26,9 @@ from .depth import depth_metrics
 from .frames import frame_sets, train_camera, view_name
 from .image import fps, image_metrics
 from .previews import preview_keys, save_previews
+from .protocol_registry import get_protocol
 from .removal import removal
-from .segmentation import query_mode, resolve_protocols, segmentation, segmentation_frames
+from .segmentation import query_mode, requested_forks, resolve_protocols, segmentation, segmentation_frames
 
 log = logging.getLogger(__name__)
 
@@ -88,13 +89,16 @@ def _memory(summary: dict, eval_peaks: dict) -> dict:
 
 
 def requested_protocol(protocol: Optional[str], config: dict) -> str:
-    """The protocol argument when given, else the run config's eval.protocol (default auto)."""
+    """The protocol argument when given (protocol and fork names, comma-separated), else the run config's
+    eval.protocol (default auto)."""
     return protocol or setting(config, "eval.protocol") or "auto"
 
 
 def evaluate_run(run_dir: str | os.PathLike, protocol: Optional[str] = None, progress: bool = True) -> dict:
     """Evaluate a trained run and write run_dir/results.json (schema: gsbench.results), holding the
-    run folder's writer lock. protocol None = the run config's eval.protocol."""
+    run folder's writer lock. protocol None = the run config's eval.protocol; a fork name (e.g.
+    "3dovs-threshold") scores its protocol under that fork, and results.json records each protocol's fork
+    under `forks`."""
     with RunLock(Path(run_dir), command="gsbench eval"):
         return _evaluate_run(Path(run_dir), protocol, progress)
 
@@ -111,14 +115,15 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
     max_width = setting(config, "train.max_width")
     rec_cams = [train_camera(scene.cameras[i], max_width) for i in fs.reconstruction]
     protocols, pskip = resolve_protocols(scene, protocol)
+    forks = requested_forks(protocol, protocols)
     sets = {p: fs.protocol_sets(p) for p in protocols}
     out = Block()
     with torch.no_grad():
         out.merge(image_metrics(method, scene, fs.reconstruction, rec_cams, config, progress))
         time_cams = rec_cams or [train_camera(scene.cameras[i], max_width) for i in fs.trained[:8]]
         out.merge(fps(method, time_cams, config))
-        scored = segmentation_frames(method, scene, protocols, sets, config)
-        out.merge(segmentation(method, scene, protocols, sets, config, frames=scored))
+        scored = segmentation_frames(method, scene, protocols, sets, config, forks=forks)
+        out.merge(segmentation(method, scene, protocols, sets, config, frames=scored, forks=forks))
         shown = preview_keys(protocols, sets, config, mode)
         scored = {k: v for k, v in scored.items() if k in shown}      # what the previews show, no more
         out.merge(removal(method, scene, fs.reconstruction, rec_cams, config))
@@ -126,7 +131,7 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
     out.merge(_ordering(run_dir))
     out.merge(_edges(run_dir))
     for p, why in pskip.items():
-        out.skip([seg_metric(b, p) for b in SEG_BASES[p]], why)
+        out.skip(get_protocol(p).plain_names(), why)
     frames_skipped = _unscored(scene, fs, protocols, sets)
 
     summary = rundir.read_optional(run_dir / rundir.TRAIN_SUMMARY)
@@ -150,7 +155,8 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
     }
     with torch.no_grad():
         pv = {k: identity[k] for k in ("run_id", "method", "scene", "providers", "backend")}
-        save_previews(run_dir, method, scene, protocols, sets, fs.reconstruction, rec_cams, config, mode, pv, scored)
+        save_previews(run_dir, method, scene, protocols, sets, fs.reconstruction, rec_cams, config, mode, pv, scored,
+                      forks)
     results = run_results(identity=identity, metrics=out.metrics, metric_impl=out.metric_impl,
                           skipped=out.skipped, per_view=out.per_view,
                           view_names=out.frames.get("reconstruction", []), frames=out.frames,
@@ -160,7 +166,8 @@ def _evaluate_run(run_dir: Path, protocol: Optional[str], progress: bool) -> dic
                           status=state if state in ("done", "failed", "nonfinite") else "done",
                           train_device=(summary.get("info") or {}).get("device"),
                           eval_device=str(getattr(method, "device", "cpu")),
-                          budget=(summary.get("info") or {}).get("budget"))
+                          budget=(summary.get("info") or {}).get("budget"),
+                          forks={p: f for p, f in forks.items() if f})
     write_json_atomic(run_dir / rundir.RESULTS, results)
     return results
 
@@ -174,14 +181,16 @@ def _cell_field(run_dir: Path, key: str) -> Any:
 
 
 def segmentation_metrics(method, scene, view_ids: list[int], cams: list, config: dict) -> tuple[dict, dict]:
-    """(metrics, skipped) of the scene's segmentation protocols on the given views at the training
-    resolution, in the configured query mode: the same code as `evaluate_run`, for the trainer's
+    """(metrics, skipped) of the scene's segmentation protocols that render frames on the given views at
+    the training resolution, in the configured query mode: the same code as `evaluate_run`, for the trainer's
     periodic evaluation. `cams` must be those views at the training resolution."""
     import torch
     mode = query_mode(config)
     cfg = copy.deepcopy(config)
     cfg.setdefault("eval", {})["resolution"] = "train"
     protocols, pskip = resolve_protocols(scene, "auto")
+    protocols = [p for p in protocols if get_protocol(p).renders_frames]    # what training logs score
+    pskip = {p: why for p, why in pskip.items() if get_protocol(p).renders_frames}
     ids = set(view_ids)
     sets = {}
     fs = frame_sets(scene, cfg)
@@ -191,14 +200,15 @@ def segmentation_metrics(method, scene, view_ids: list[int], cams: list, config:
         out = segmentation(method, scene, protocols, sets, cfg, modes=(mode,))
     metrics, skipped = {}, {}
     for p in protocols:
-        for b in SEG_BASES[p]:
-            k = seg_metric(b, p, None, "held-out")
-            metrics[seg_metric(b, p)] = out.metrics.get(k)
+        proto = get_protocol(p)
+        for b in proto.metrics:
+            k = proto.metric_name(b, None, "held-out")
+            metrics[proto.metric_name(b)] = out.metrics.get(k)
             if k in out.skipped:
-                skipped[seg_metric(b, p)] = out.skipped[k]
+                skipped[proto.metric_name(b)] = out.skipped[k]
     for p, why in pskip.items():
-        for b in SEG_BASES[p]:
-            metrics[seg_metric(b, p)] = None
-            skipped[seg_metric(b, p)] = why
+        for n in get_protocol(p).plain_names():
+            metrics[n] = None
+            skipped[n] = why
     return metrics, skipped
 

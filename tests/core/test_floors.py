@@ -49,6 +49,7 @@ FLOORS: dict[str, int] = {
     "gsbench.metric_table": 0,     # every metric name and how it is shown
     "gsbench.preview_files": 0,    # the previews folder of a run: manifest and arrays, writer and reader
     "gsbench.step_timers": 0,      # wall-time totals of a training step's parts (benchmarks/train_speed.py)
+    "gsbench.plugin_registry": 0,  # the mechanics of the layouts' and the protocols' registries
     # 1: what a method is built from
     "gsbench.render": 1,
     "gsbench.priors": 1,

@@ -50,7 +50,7 @@ def test_study_cell_counts():
     assert sev == {0, 1, 2, 3, 4, 5}
     assert len(dn.cells()) == 2 * (4 * 5 + 1)   # two scenes x (4 kinds x 5 severities + clean)
     rec = grids.load_grid("reconstruction-cpu")
-    assert sorted({c.method for c in rec.cells()}) == ["gaussiands", "grouping", "twostage", "vanilla"]
+    assert sorted({c.method for c in rec.cells()}) == ["gaussiands", "grouping", "lift", "twostage", "vanilla"]
 
 
 def test_lambda_sweeps_union_without_duplicate_default():

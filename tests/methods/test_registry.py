@@ -56,7 +56,7 @@ def tiny_scene(tmp_path_factory):
 
 # ---------------------------------------------------------------------------- one registration
 def test_builtin_methods_in_report_order():
-    assert tuple(registry.METHODS) == ("vanilla", "twostage", "grouping", "gaussiands")
+    assert tuple(registry.METHODS) == ("vanilla", "twostage", "lift", "grouping", "gaussiands")
     for name in registry.METHODS:
         assert registry.get_method(name).name == name
 
@@ -237,7 +237,7 @@ def test_an_entry_point_registers_a_method_after_the_builtins(fresh_table, monke
                                budget=f"{__name__}:_budget_dummy", defaults={"alpha": 1.5})
     eps = [_FakeEntryPoint("ep-test", "pkg.spec:SPEC", lambda: spec)]
     monkeypatch.setattr(fresh_table, "entry_points", lambda group: eps if group == "gsbench.methods" else [])
-    assert list(fresh_table.METHODS) == ["vanilla", "twostage", "grouping", "gaussiands", "ep-test"]
+    assert list(fresh_table.METHODS) == ["vanilla", "twostage", "lift", "grouping", "gaussiands", "ep-test"]
     assert fresh_table.section_defaults()["ep_test"] == {"alpha": 1.5}
     cfg = load_config("ep-test", None, ["ep_test.alpha=2.5"])        # its own section is a checked key
     assert cfg["ep_test"]["alpha"] == 2.5
