@@ -36,6 +36,10 @@ NON_RESULT_KEYS = (("priors", "cache_dir"), ("train", "data_on"))
 # keys added after run folders were stored: left out of the hash while they hold their null default,
 # so the run ids (and config keys) of configs that do not set them stay what they were
 NULL_DEFAULT_KEYS = (("train", "views"), ("gaussiands", "sem_geometry"))
+# settings whose value names a rule the scene decides (`auto`): the config keeps the rule, and its `resolved`
+# section ({dotted key: concrete value}, written where the config first meets its scene) gives what the rule
+# chose there. The id hashes the concrete value, so `auto` on a synthetic scene is the same run as `gt`.
+SCENE_RESOLVED_KEYS = ("priors.depth.provider",)
 _NO_DEFAULT = object()
 
 
@@ -340,6 +344,10 @@ def canonical(cfg: dict) -> dict:
     resolved, scene, run_id), without another method's own section and without the shared sections its
     method does not read. The one form both hashes below read."""
     c = copy.deepcopy(cfg)
+    settled = c.get("resolved") if isinstance(c.get("resolved"), dict) else {}
+    for key in SCENE_RESOLVED_KEYS:
+        if isinstance(settled.get(key), str) and _has_key(c, key):
+            set_dotted(c, key, settled[key])
     for path in NON_RESULT_KEYS:
         d = c
         for p in path[:-1]:

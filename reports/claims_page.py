@@ -206,7 +206,9 @@ def scope_line(cells: list[Published], rows: int) -> str:
         scenes.setdefault(name, set()).add(len((res.get("split") or {}).get("trained_ids") or []))
         for kind, prov in (res.get("providers") or {}).items():
             if prov and kind in ("depth", "masks", "features"):
-                priors.setdefault(kind, set()).add(str(prov).split(":", 1)[0].split("+", 1)[0])
+                # `auto -> gt-...`: the provider auto chose (gsbench.config.SCENE_RESOLVED_KEYS)
+                name = str(prov).removeprefix("auto -> ")
+                priors.setdefault(kind, set()).add(name.split(":", 1)[0].split("+", 1)[0])
     if not scenes:
         return "Scope: no claim row has a published cell yet."
     where = "; ".join(f"{n} ({kinds.get(n, 'unknown kind')}, {'/'.join(str(v) for v in sorted(views))} training "
@@ -310,7 +312,8 @@ def build_page(current: list[Published], stale: list[Stale], grids: list[Grid], 
     `figure_dir` is the figures' folder relative to the page."""
     with tempfile.TemporaryDirectory(prefix="gsbench-claims-page-") as tmp:
         res = _results(current, Path(tmp))
-        later, kinds = frozenset(g.study for g in grids if g.later_seeds), scene_kinds(current)
+        looked = {g.name for g in grids if g.later_seeds}
+        later, kinds = frozenset(c.run_id for c in current if c.grid in looked), scene_kinds(current)
         rows = claim_rows(res, later=later, kinds=kinds) if res is not None else []
         claims = (claims_table(res, kinds=kinds, rows=rows) if res is not None else []) or [empty_claims_table()]
         scope, by_regime = scope_line(current, len(claims[0].rows)), regime_summary(res, rows)

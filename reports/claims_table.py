@@ -52,6 +52,7 @@ from gsbench.methods.gaussiands.study_table import (  # noqa: F401  (PAPER_CLAIM
     Regime,
 )
 from gsbench.reports.ablations import _covered, run_dropped
+from gsbench.reports.claims_caption import claims_caption
 from gsbench.reports.claims_tests import (
     TOST_ALPHA,
     mde_within_r,
@@ -69,11 +70,11 @@ from gsbench.reports.regimes import declared, regime_label
 from gsbench.reports.stats import ALPHA, SEEDS_CAP, Diff, compare, holm, p_two_sided, seeds_for_mde
 from gsbench.reports.studies import _get
 from gsbench.reports.table import Cell, Column, Row, Table
-from gsbench.train.losses import EDGE_FLOOR
 
 REPRODUCED, OPPOSITE, INCONCLUSIVE, NOT_RUN, NOT_TESTABLE = (
     "reproduced", "opposite", "inconclusive", "not run", "not testable")
 SMALLER, LARGER, NOT_REPRODUCED, BLIND = "smaller than claimed", "larger than claimed", "not reproduced", "blind"
+NOT_MEASURED = "not measured"   # the runs finished but recorded no value for the metric (with their reason)
 FAILS_HOLM, SECOND_LOOK = "fails Holm", "after a second look"
 # the verdicts that reject a hypothesis (zero, the paper's value or the margin): the ones Holm and a
 # second look can qualify
@@ -210,11 +211,24 @@ def _mde_text(mde: float | None, decimals: int, why: str) -> str:
     return f"{mde:.{decimals}f}" if mde is not None else f"n/a ({why})"
 
 
+def margin_of(claim: Claim) -> float:
+    """A robustness claim's equivalence margin, in the units it is tested in (log units for a ratio)."""
+    return ROBUST_MARGIN_DB if claim.margin is None else claim.margin
+
+
+def margin_text(claim: Claim) -> str:
+    """'+-0.5 dB', or for a ratio claim the ratio band '0.80 to 1.25'."""
+    m = margin_of(claim)
+    if claim.log_ratio:
+        return f"{math.exp(-m):.2f} to {math.exp(m):.2f}"
+    return f"+-{m:g} {metric_spec(claim.metric).label.split('(')[-1].rstrip(')')}".rstrip()
+
+
 def seed_target(claim: Claim) -> float | None:
     """The MDE the seed rule asks of a claim, in display units: half the paper's effect (or of its r);
     for a robustness claim, the margin (a drop of that size must be seen); None without either."""
     if claim.direction == 0:
-        return ROBUST_MARGIN_DB
+        return margin_of(claim)
     return abs(claim.paper) / 2.0 if claim.paper else None
 
 
@@ -234,7 +248,7 @@ def _seeds_text(claim: Claim, d: Diff) -> str:
     if d.method != "paired" or d.se is None:
         return "n/a (" + ("one seed" if d.method == "paired" else "unpaired") + ")"
     if claim.direction == 0:
-        return _met(seeds_for_tost(d.se * math.sqrt(d.n_a), ROBUST_MARGIN_DB), d.n_a)
+        return _met(seeds_for_tost(d.se * math.sqrt(d.n_a), margin_of(claim)), d.n_a)
     return _met(seeds_for_mde(d.se, d.n_a, target), d.n_a)
 
 
@@ -290,10 +304,12 @@ def _measure_robust(claim: Claim, d: Diff, text: str, mde: str, seeds: str) -> M
     """A robustness claim by TOST against +-margin (module docstring)."""
     if d.se is None or d.df is None or d.delta is None:
         return Measured(text, INCONCLUSIVE, mde, True, d.has_interval, seeds)
-    eq = tost(d.delta, d.se, d.df, ROBUST_MARGIN_DB)
-    v = verdict(0, eq.lo, eq.hi)
-    text += (f"; {100 * (1 - 2 * TOST_ALPHA):g} % [{eq.lo:+.2f}, {eq.hi:+.2f}], TOST p {eq.p:.2g}")
-    power = (f"TOST power {tost_power(d.se * math.sqrt(d.n_a), d.n_a, ROBUST_MARGIN_DB):.2f} at 0"
+    margin = margin_of(claim)
+    eq = tost(d.delta, d.se, d.df, margin)
+    v = verdict(0, eq.lo, eq.hi, margin=margin)
+    band = (f"{math.exp(eq.lo):.2f}, {math.exp(eq.hi):.2f}" if claim.log_ratio else f"{eq.lo:+.2f}, {eq.hi:+.2f}")
+    text += (f"; {100 * (1 - 2 * TOST_ALPHA):g} % [{band}] against {margin_text(claim)}, TOST p {eq.p:.2g}")
+    power = (f"TOST power {tost_power(d.se * math.sqrt(d.n_a), d.n_a, margin):.2f} at 0"
              if d.method == "paired" and d.n_a >= 2 else mde)
     return Measured(text, v, power, not d.significant, d.has_interval, seeds, _tests(tost=eq.p, harm=eq.p_harm),
                     rests_on(v, 0))
@@ -310,11 +326,12 @@ def measure(res: Results, claim: Claim, ids: list[str], protocol: Any) -> Measur
     a, b = _select(res, ids, claim.row), _select(res, ids, claim.reference)
     va, vb = res.seed_values(a, concrete, sp.scale), res.seed_values(b, concrete, sp.scale)
     if not va or not vb:
-        return Measured("n/a (" + ("compared row" if not va else "reference row") + " not run or not evaluated)",
-                        NOT_RUN)
+        return _unmeasured(res, a if not va else b, concrete, "compared row" if not va else "reference row")
+    if claim.log_ratio:
+        va, vb = _logs(va), _logs(vb)
     why = _dropped_reason(res, a + b, list(claim.row) + list(claim.reference))
     d: Diff = compare(va, vb)
-    text = d.text(sp.decimals)
+    text = ratio_text(d) if claim.log_ratio else d.text(sp.decimals)
     mde, seeds = _mde_text(d.mde, sp.decimals, d.reason or "no spread"), _seeds_text(claim, d)
     if why:
         return Measured(text + f"; setting dropped: {why}", NOT_TESTABLE, mde, interval=d.has_interval, seeds=seeds)
@@ -333,15 +350,40 @@ def measure(res: Results, claim: Claim, ids: list[str], protocol: Any) -> Measur
                     rests_on(v, claim.direction))
 
 
-def holm_qualify(measured: list[tuple[Claim, Measured]], later: frozenset[str] = frozenset()) -> int:
+def _logs(values: dict) -> dict:
+    """log of each positive value (a ratio claim); a value at or below zero has no log and is left out."""
+    return {k: math.log(v) for k, v in values.items() if v > 0.0}
+
+
+def ratio_text(d: Diff) -> str:
+    """A log-scale difference printed as the ratio row / reference: 'ratio 0.97 [0.91, 1.04] (n=3, paired)'."""
+    if d.delta is None:
+        return d.text(2)
+    s = f"ratio {math.exp(d.delta):.2f}"
+    if d.has_interval:
+        s += f" [{math.exp(d.lo):.2f}, {math.exp(d.hi):.2f}]" + (" *" if d.significant else "")  # type: ignore[arg-type]
+    tag = f"n={d.n_a}, paired" if d.method == "paired" else f"n={d.n_a} vs {d.n_b}"
+    return s + f" ({tag}{d.dropped_text()})"
+
+
+def _unmeasured(res: Results, rids: list[str], metric: str | None, side: str) -> Measured:
+    """A row with no value on one side: 'not run' when that side has no finished run, else 'not measured'
+    with the reason its runs recorded (e.g. no LPIPS weights on this machine)."""
+    if not rids or not any(res.runs.at[r, "status"] == "done" for r in rids):
+        return Measured(f"n/a ({side} not run)", NOT_RUN)
+    reason = res.cell(rids, metric).reason or "no value recorded"
+    return Measured(f"n/a ({side}: {reason})", f"{NOT_MEASURED}: {reason}")
+
+
+def holm_qualify(measured: list[tuple[Claim, Measured]], later: frozenset[int] = frozenset()) -> int:
     """Holm across every test of every row (`Measured.tests`: the family is fixed by the rules, not by
     the verdicts); a verdict is qualified '(fails Holm)' when a hypothesis it rejects has a Holm p above
-    ALPHA, and '(after a second look)' when its study is in `later` (its grid got seeds after a look at
-    the results). Sets each row's p / Holm p (those its verdict rests on, else its zero / TOST test) in
-    place; returns the family's size."""
+    ALPHA, and '(after a second look)' when its row's index is in `later` (a cell of the row came from a
+    grid that got seeds after a look at its results). Sets each row's p / Holm p (those its verdict rests
+    on, else its zero / TOST test) in place; returns the family's size."""
     family = [(m, name, p) for _c, m in measured for name, p in m.tests.items()]
     adjusted = {(id(m), name): hp for (m, name, _p), hp in zip(family, holm([p for _m, _n, p in family]))}
-    for c, m in measured:
+    for i, (_c, m) in enumerate(measured):
         base = m.verdict.split(":", 1)[0]
         rests = m.rests if base in REJECTING else ()
         shown = [n for n in rests if n in m.tests] or [n for n in ("zero", "tost") if n in m.tests][:1]
@@ -351,7 +393,7 @@ def holm_qualify(measured: list[tuple[Claim, Measured]], later: frozenset[str] =
         if base not in REJECTING:
             continue
         fails = any(adjusted.get((id(m), n), 1.0) > ALPHA for n in rests)
-        notes = ([FAILS_HOLM] if fails else []) + ([SECOND_LOOK] if c.study in later else [])
+        notes = ([FAILS_HOLM] if fails else []) + ([SECOND_LOOK] if i in later else [])
         m.verdict = qualified(m.verdict, notes)
     return len(family)
 
@@ -371,6 +413,7 @@ class ClaimRow:
     label: str = "–"
     guard: Guard | None = None
     measured: Measured | None = None
+    looked: bool = False   # a cell of the row came from a grid that got seeds after a look at its results
 
 
 def regime_cell(regime: Regime, protocol: Any, kinds: dict[str, str] | None) -> str:
@@ -384,7 +427,8 @@ def regime_cell(regime: Regime, protocol: Any, kinds: dict[str, str] | None) -> 
 def claim_rows(res: Results, claims: list[Claim] | None = None,
                later: frozenset[str] = frozenset(), kinds: dict[str, str] | None = None) -> list[ClaimRow]:
     """One row per claim and regime its study ran in (one row without a regime when it did not run at
-    all), measured, guarded in its regime and Holm-qualified (`holm_qualify`) together."""
+    all), measured, guarded in its regime and Holm-qualified (`holm_qualify`) together. `later`: the run
+    ids of the cells whose grid got seeds after a look at its results (a row with one is qualified)."""
     claims = study_table.paper_claims() if claims is None else claims
     marks = regime_marks(res)
     rows: list[ClaimRow] = []
@@ -395,22 +439,24 @@ def claim_rows(res: Results, claims: list[Claim] | None = None,
             rows.append(ClaimRow(c))
         for regime, pr, gids in groups:
             m = measure(res, c, gids, pr)
-            guard = claim_guard(marks, c.key, regime)
+            guard = Guard(f"none needed: {c.unguarded}", None) if c.unguarded else claim_guard(marks, c.key, regime)
             # blind replaces only the verdicts whose interval includes zero (a robustness "reproduced" too,
             # since a blind study also shows no change): an interval that excludes zero shows the mechanism
             # whatever the controls say; a verdict already blind (no input) keeps its own reason
             if guard.blind and m.no_effect and not m.verdict.startswith(BLIND):
                 m.verdict = guard.blind
-            rows.append(ClaimRow(c, regime, regime_cell(regime, pr, kinds), guard, m))
-    holm_qualify([(r.claim, r.measured) for r in rows if r.measured is not None], later)
+            rows.append(ClaimRow(c, regime, regime_cell(regime, pr, kinds), guard, m, bool(later & set(gids))))
+    measured = [r for r in rows if r.measured is not None]
+    looked = frozenset(i for i, r in enumerate(measured) if r.looked)
+    holm_qualify([(r.claim, r.measured) for r in measured], looked)
     return rows
 
 
 def claims_table(res: Results, claims: list[Claim] | None = None, later: frozenset[str] = frozenset(),
                  kinds: dict[str, str] | None = None, rows: list[ClaimRow] | None = None) -> list[Table]:
     """One row per claim and regime the claim's study ran in ('not run' when it did not run at all);
-    no table when none of the claims' studies ran. `later`: the studies whose grid got seeds after a
-    look at its results; `kinds`: scene name -> 'synthetic' / 'real'; `rows`: `claim_rows` already made."""
+    no table when none of the claims' studies ran. `later`: the run ids of the cells whose grid got seeds
+    after a look at its results; `kinds`: scene name -> 'synthetic' / 'real'; `rows`: `claim_rows` already made."""
     claims = study_table.paper_claims() if claims is None else claims
     if not any(res.run_ids(study=c.study) for c in claims):
         return []
@@ -425,42 +471,5 @@ def claims_table(res: Results, claims: list[Claim] | None = None, later: frozens
         out.append(Row([c.text, c.source, r.label, r.guard.text],
                        [Cell(text=paper_text(c)), Cell(text=m.text), Cell(text=m.mde), Cell(text=m.verdict),
                         Cell(text=m.seeds), Cell(text=_p_text(m))]))
-    return [Table("paper_claims", "Paper claims", _caption(k), ["Claim", "Paper source", "Regime", "Guarded by"],
+    return [Table("paper_claims", "Paper claims", claims_caption(k), ["Claim", "Paper source", "Regime", "Guarded by"],
                   CLAIM_COLUMNS, out, section="claims")]
-
-
-def _caption(k: int) -> str:
-    return ("Claims of the paper's ablation section against gsbench's measurements: effect = compared row minus "
-            "reference row (display units; PSNR in dB, IoU in %), with its 95 % interval (t interval paired on the "
-            "seeds both rows ran, a dropped seed is named; Welch when they share none). Lambda claims: the "
-            "within-seed Pearson r (seed fixed effects: lambda and the metric centred within each seed; Fisher z "
-            "on n - seeds - 2) and the fixed-effects slope with its t interval. MDE = the smallest true effect "
-            "this design detects (two-sided 5 % t test, 80 % power, exact noncentral t; for r, Fisher z) from the "
-            "observed spread at its n. Paper numbers are compared at the paper's decimals. Verdict, for a claim "
-            "with a number: reproduced (interval excludes zero on the paper's side and contains the paper's "
-            "value), larger than claimed (excludes zero, lies wholly beyond the paper's value), smaller than "
-            "claimed (excludes zero, lies wholly short of it), not reproduced (contains zero, lies wholly short "
-            "of the paper's value; the largest compatible effect is printed), opposite (excludes zero on the "
-            "other side), inconclusive (contains zero and the paper's value, or one seed); without a number only "
-            "the side of zero counts. Robustness claims are an equivalence test: TOST at "
-            f"{100 * TOST_ALPHA:g} % a side against +-{ROBUST_MARGIN_DB} dB (a margin chosen by gsbench), "
-            f"reproduced when both one-sided tests reject (the {100 * (1 - 2 * TOST_ALPHA):g} % interval lies "
-            "inside the margin), opposite when that interval lies wholly beyond -margin; their MDE column gives "
-            "TOST's power at a true difference of zero. Regime = where the row's cells ran (scene, training views, "
-            "preset, prior providers); Guarded by = the positive control marked in that regime (table "
-            "claims_controls; a control may use the exact version of the claim's depth prior, and says so). "
-            "blind = any verdict whose interval includes zero (robustness 'reproduced' too) while no control of "
-            "the claim is marked in its regime ('no control in this regime' when none ran there), or while the "
-            "compared row lacked what the mechanism acts on (for L_ds: an "
-            f"edge map E_d marking under {100 * EDGE_FLOOR:g} % of the pixels); not run = no runs. "
-            "Holm: every row's tests form one family, fixed by the rules before any verdict (no effect, and the "
-            "paper's value where it gives one; for robustness TOST and a drop beyond the margin), "
-            f"{k} tests in all, corrected together by Holm at 5 %. p (Holm p) = the p-value of the hypothesis the "
-            "row's verdict rejects (the larger of the two for 'larger' / 'smaller than claimed'; no effect, or "
-            "TOST, where the verdict rejects nothing) and its Holm-adjusted value. A verdict that "
-            "rejects a hypothesis whose Holm p exceeds 0.05 reads '(fails Holm)'; one from a grid whose seeds were "
-            "extended after a look at its results reads '(after a second look)' (docs/grids.md, \"Seeds\"). "
-            "Seeds for the MDE = the seed rule: how many paired seeds this row's observed spread needs for an MDE "
-            "of at most half the paper's effect (robustness: TOST power 80 % at a true difference of zero; lambda "
-            "claims: the seeds, each adding its lambda settings as runs, at which the smallest detectable "
-            "within-seed |r| is half the paper's), 'met' when it ran that many.")

@@ -68,6 +68,9 @@ def regime_of(config: Any, scene: str) -> Regime:
     config = config if isinstance(config, dict) else {}
     priors = config.get("priors") if isinstance(config.get("priors"), dict) else {}
     depth = _provider(priors, "depth")
+    settled = config.get("resolved") if isinstance(config.get("resolved"), dict) else {}
+    if depth == "auto" and isinstance(settled.get("priors.depth.provider"), str):
+        depth = settled["priors.depth.provider"]   # what `auto` chose on the cell's scene (gsbench.config)
     dist = (priors.get("depth") or {}).get("distortion") if isinstance(priors.get("depth"), dict) else None
     distortion = float(dist) if depth == "gt" and isinstance(dist, (int, float)) and math.isfinite(dist) else None
     train = config.get("train") if isinstance(config.get("train"), dict) else {}

@@ -11,10 +11,11 @@ from typing import Any, Optional
 from gsbench import rundir
 from gsbench.config import get_dotted, load_config
 from gsbench.config import run_id as make_run_id
-from gsbench.datasets import scene_fingerprint
+from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.datasets.synthetic import make_scene
 from gsbench.errors import InputError
 from gsbench.grids.grid_file import Cell, Grid, SceneSpec
+from gsbench.priors.depth import asks_depth_rule, settle_depth_rule
 from gsbench.store import write_json_atomic
 
 CACHE_DIRNAME = rundir.CACHE_DIRNAME
@@ -90,11 +91,47 @@ class PlannedCell:
                 "seed": self.cell.seed, "method": self.cell.method}
 
 
+def missing_scene_folders(grid: Grid) -> list[str]:
+    """Why each folder scene of `grid` is not here (an unset variable in its path, or no such folder);
+    [] when every scene can be resolved (presets are generated)."""
+    out = []
+    for spec in {json.dumps(c.scene.to_dict(), sort_keys=True): c.scene for c in grid.cells()}.values():
+        if not spec.path:
+            continue
+        p = os.path.expandvars(os.path.expanduser(spec.path))
+        if "$" in p:
+            out.append(f"scene {spec.path!r}: unset environment variable in the path")
+        elif not Path(p).is_dir():
+            out.append(f"scene {p}: folder not found")
+    return out
+
+
+@dataclass(frozen=True)
+class GeneratedSceneFacts:
+    """What the scene-decided rules (`priors.depth.provider: auto`) read of a generated scene without
+    generating it: the generator writes GT depth for every view (datasets/synthetic.py)."""
+    has_depth: bool = True
+    has_points: bool = True
+
+
+def settle_on_spec(config: dict, spec: SceneSpec) -> dict:
+    """`config` settled (`settle_depth_rule`) on the scene `spec` names without generating it: a preset's
+    facts from its generator, a folder's from the folder when it is here (else unsettled: its id is then
+    the rule's own, which no published cell has)."""
+    if not asks_depth_rule(config):
+        return config
+    if spec.preset:
+        return settle_depth_rule(config, GeneratedSceneFacts())
+    folder = Path(os.path.expandvars(os.path.expanduser(spec.path or "")))
+    return settle_depth_rule(config, load_scene(folder)) if spec.path and folder.is_dir() else config
+
+
 def plan(grid: Grid, runs_dir: Path, create_scenes: bool = True) -> list[PlannedCell]:
     """Resolve scenes (generating presets once), configs and run ids of every cell."""
     runs_dir = Path(runs_dir)
     scene_paths: dict[str, Optional[Path]] = {}
     fingerprints: dict[str, str] = {}
+    loaded: dict[str, Any] = {}
     seen_ids: set[str] = set()
     out = []
     for cell in grid.cells():
@@ -108,6 +145,10 @@ def plan(grid: Grid, runs_dir: Path, create_scenes: bool = True) -> list[Planned
         if sp is None:
             out.append(PlannedCell(cell, config, None, None, None))
             continue
+        if asks_depth_rule(config):   # `auto` is settled on the scene before the id is taken
+            if skey not in loaded:
+                loaded[skey] = load_scene(sp)
+            config = settle_depth_rule(config, loaded[skey])
         rid = make_run_id(config, fingerprints[skey])
         if rid in seen_ids:
             continue   # the same resolved config reached through two sweeps

@@ -33,9 +33,9 @@ from gsbench.config import run_id as make_run_id
 from gsbench.datasets import load_scene
 from gsbench.errors import InputError, shorten
 from gsbench.grids.claims_plan import plan_grids, plan_names
-from gsbench.grids.grid_file import Grid, load_grid
+from gsbench.grids.grid_file import Grid, SceneSpec, load_grid
 from gsbench.grids.liveness import cell_state
-from gsbench.grids.planning import PlannedCell, cell_config, plan
+from gsbench.grids.planning import PlannedCell, cell_config, plan, settle_on_spec
 from gsbench.grids.store_format import (
     STORE_VERSION,
     cell_files,
@@ -170,7 +170,12 @@ def classify(cells: list[Published], grids: list[Grid]) -> tuple[list[Published]
         skey, fp = _scene_key(c.record["cell"].get("scene")), str(c.record["scene_fingerprint"])
         key = (c.grid, skey, fp)
         if key not in ids:
-            ids[key] = {make_run_id(cfg, fp) for k, cfg in configs[g.name] if k == skey}
+            try:
+                spec: SceneSpec | None = SceneSpec(**c.record["cell"]["scene"])
+            except TypeError:   # not a scene spec: no config of today's plan settles on it
+                spec = None
+            ids[key] = {make_run_id(settle_on_spec(cfg, spec) if spec else cfg, fp)
+                        for k, cfg in configs[g.name] if k == skey}
         if c.run_id in ids[key]:
             current.append(c)
         else:

@@ -15,11 +15,13 @@ compared.
 from __future__ import annotations
 
 import copy
+import os
 import random
 import tempfile
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from gsbench import rundir
 from gsbench.datasets import scene_fingerprint
@@ -54,7 +56,9 @@ class CellCheck:
     def mode(self) -> str:
         prov = self.cell.record["provenance"]
         if self.exact:
-            return f"exact (same CPU family: {prov.get('cpu_model')})"
+            threads = published_threads(self.cell.record)
+            at = f", {threads} torch thread{'s' if threads != 1 else ''} as published" if threads else ""
+            return f"exact (same CPU family: {prov.get('cpu_model')}{at})"
         return (f"judged by the seed spread: {100 * (1 - ALPHA):g} % prediction interval of the setting's published "
                 f"seeds (published on {prov.get('cpu_model') or 'an unrecorded CPU'}, "
                 f"this machine {cpu_facts().get('cpu_model') or 'unknown'})")
@@ -86,10 +90,43 @@ def _rerun(cell: Published, work: Path) -> dict[str, Any]:
     spec = {"run_dir": str(run_dir), "scene_path": str(scene_path), "config": config, "study": rec.get("study"),
             "axes": rec["cell"].get("axes", {}), "scene": scene.to_dict(), "seed": rec["cell"].get("seed"),
             "method": rec["cell"].get("method")}
-    out = run_cell(spec)
+    with thread_budget(published_threads(rec)):
+        out = run_cell(spec)
     if out["state"] != "done":
         raise RuntimeError(f"the re-run {out['state']}: {out.get('error')}")
     return read_json(run_dir / rundir.RESULTS)
+
+
+def published_threads(rec: dict) -> int | None:
+    """The torch thread count the cell was trained and evaluated with (its provenance), None when it
+    recorded none. Some reductions outside the training step (the autoencoder, the priors' products,
+    the evaluation) split their work by it, so a re-run on the same CPU family matches bit for bit only
+    at the same count."""
+    n = (rec.get("provenance") or {}).get("torch_threads")
+    return n if isinstance(n, int) and not isinstance(n, bool) and n >= 1 else None
+
+
+@contextmanager
+def thread_budget(threads: int | None) -> Iterator[None]:
+    """Run the block with GSBENCH_THREADS / OMP / MKL set to `threads` (as a grid worker does), then put
+    the environment and torch's thread count back; None changes nothing."""
+    if threads is None:
+        yield
+        return
+    import torch  # lazy: gsbench verify's start-up does not need it before a cell runs
+    keys = ("GSBENCH_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+    before, torch_before = {k: os.environ.get(k) for k in keys}, torch.get_num_threads()
+    os.environ.update({k: str(threads) for k in keys})
+    torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        for k, v in before.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        torch.set_num_threads(torch_before)
 
 
 def same_setting(cell: Published, cells: list[Published]) -> list[dict]:

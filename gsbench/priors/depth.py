@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
-from gsbench.config import check_key, setting
+from gsbench.config import check_key, get_dotted, setting
 from gsbench.config_keys import DEPTH_PROVIDERS
 from gsbench.datasets.noise import apply_noise
 from gsbench.device import default_device
@@ -219,6 +219,29 @@ def auto_depth_provider(depth_cfg: Mapping, scene) -> tuple[str | None, str]:
         return "depth-anything", ""
     return None, ("priors.depth.provider=auto: the scene has no GT depth and no sparse points (`gsbench points "
                   "SCENE` triangulates them), and priors.depth.model_path names no depth model")
+
+
+def asks_depth_rule(config: Mapping) -> bool:
+    """Whether the config's depth provider is the rule ``auto``, which needs the scene to settle."""
+    try:
+        depth_cfg = get_dotted(config, "priors.depth")
+    except KeyError:
+        return False
+    return isinstance(depth_cfg, Mapping) and depth_cfg.get("provider") == "auto"
+
+
+def settle_depth_rule(config: dict, scene) -> dict:
+    """`config` with its `resolved` section naming what ``priors.depth.provider: auto`` chooses on `scene`
+    (gsbench.config.SCENE_RESOLVED_KEYS): the run id is then the concrete provider's, so `auto` on a
+    synthetic scene is the same run, with the same id, as `gt`. Any other provider: `config` unchanged.
+    Called where a config first meets its scene (training, grid planning), before its id is taken."""
+    if not asks_depth_rule(config):
+        return config
+    depth_cfg = get_dotted(config, "priors.depth")
+    chosen, _why = auto_depth_provider(depth_cfg, scene)
+    out = dict(config)
+    out["resolved"] = {**(config.get("resolved") or {}), "priors.depth.provider": chosen or "none"}
+    return out
 
 
 def resolved_depth_cfg(depth_cfg: Mapping, scene) -> tuple[dict, str]:

@@ -28,6 +28,7 @@ from gsbench.device import resolve_device
 from gsbench.environment import PeakMemory, env_info
 from gsbench.errors import InputError, NonFiniteError, Terminated, interrupted
 from gsbench.methods.registry import get_method, resolve_for_scene
+from gsbench.priors.depth import asks_depth_rule, settle_depth_rule
 from gsbench.render.threads import numba_threading_layer
 from gsbench.runlock import RunLock
 from gsbench.runs.training import train_method
@@ -73,6 +74,9 @@ def train_run(config: dict, scene_path: str | Path, run_dir: Path, progress: boo
 
 def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) -> Path:
     fp = _fingerprint(scene_path)
+    scene = _load_scene(scene_path) if asks_depth_rule(config) else None
+    if scene is not None:   # `auto` is settled on the scene before the id is taken
+        config = settle_depth_rule(config, scene)
     rid = run_id(config, fp)
     st = rundir.read_status(run_dir)
     if (run_dir / rundir.CONFIG).exists():
@@ -84,7 +88,7 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
         if progress:
             log.warning("gsbench train: %s is already done (run %s); not retrained", run_dir, rid)
         return run_dir
-    scene = _load_scene(scene_path)
+    scene = scene or _load_scene(scene_path)
     cfg, dropped = resolve_for_scene(config, scene)
     cfg["scene"] = {"path": str(scene_path.resolve()), "name": scene.name, "fingerprint": fp}
     cfg["run_id"] = rid

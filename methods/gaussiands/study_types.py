@@ -44,6 +44,11 @@ class Claim:
     # (the mean over its runs); below it an absent effect reads 'blind' (reports/claims_table.py)
     inputs: dict = field(default_factory=dict)
     paper_decimals: int = PAPER_DECIMALS           # decimals the paper prints `paper` with
+    # a robustness claim's equivalence margin in display units (None: the study table's ROBUST_MARGIN_DB);
+    # with log_ratio, in natural-log units of the ratio row / reference
+    margin: float | None = None
+    log_ratio: bool = False    # compare log(metric): the effect is the ratio row / reference (e.g. FPS)
+    unguarded: str = ""        # why no positive control applies (a timing, not a mechanism); "" = guarded
     study: str = ""                                # the declaring study (set by the study table)
 
 

@@ -80,13 +80,25 @@ def test_resolver_keeps_everything_on_a_full_scene():
 
 
 def test_resolver_drops_depth_terms_without_depth_prior():
-    cfg, dropped = resolve_for_scene(load_config("gaussiands"), _scene(depth=False))
+    cfg, dropped = resolve_for_scene(load_config("gaussiands", None, ["priors.depth.provider=gt"]), _scene(depth=False))
     on = cfg["gaussiands"]["losses"]
     assert on["depth"] is False and on["ds"] is False and on["tv"] is True and cfg["semantic"]["loss"] is True
     assert "GT depth" in dropped["gaussiands.losses.depth"] and "priors.depth" in dropped
     # the sparse provider works from points
     cfg2, d2 = resolve_for_scene(load_config("gaussiands", None, ["priors.depth.provider=sparse"]), _scene(depth=False))
     assert cfg2["gaussiands"]["losses"]["depth"] is True and d2 == {}
+
+
+def test_default_depth_rule_keeps_the_depth_terms_on_a_scene_with_only_points():
+    # the default provider is the rule `auto`: no GT depth but sparse points -> sfm, the terms kept
+    cfg, dropped = resolve_for_scene(load_config("gaussiands"), _scene(depth=False))
+    assert cfg["priors"]["depth"]["provider"] == "auto"
+    assert cfg["gaussiands"]["losses"]["depth"] is True and cfg["gaussiands"]["losses"]["ds"] is True
+    assert dropped == {}
+    # neither GT depth nor points: the terms are dropped, with what is missing named
+    cfg2, d2 = resolve_for_scene(load_config("gaussiands"), _scene(depth=False, points=False))
+    assert cfg2["gaussiands"]["losses"]["depth"] is False
+    assert "no sparse points" in d2["gaussiands.losses.depth"] or "no sparse points" in d2["priors.depth"]
 
 
 def test_resolver_drops_semantics_without_semantics():

@@ -14,7 +14,7 @@ from gsbench.config import default_tree, flatten
 FOLDERS = ("gsbench", "methods", "metrics", "datasets", "reports")
 # (file, key) sites still restating a default, each reading a config *section* handed in as a dict
 ALLOWED: set[tuple[str, str]] = {
-    ("gsbench/priors/depth.py", "distortion"), ("gsbench/priors/depth.py", "provider"),
+    ("gsbench/priors/depth.py", "distortion"),
     ("gsbench/priors/depth.py", "severity"), ("gsbench/priors/segmenter.py", "severity"),
     ("gsbench/priors/features.py", "provider"), ("gsbench/priors/features.py", "noise"),
     ("gsbench/priors/features.py", "context"), ("gsbench/priors/features.py", "model"),

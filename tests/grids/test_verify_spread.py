@@ -104,3 +104,25 @@ def test_verify_on_the_publishing_cpu_stays_exact(monkeypatch, tmp_path):
     check = verify_mod.verify_cell(cells[0], tmp_path, cells)
     assert check.exact and not check.ok
     assert [r.metric for r in check.rows if not r.ok] == ["psnr"]
+
+
+def test_a_rerun_uses_the_thread_count_the_cell_was_published_with(monkeypatch):
+    # some reductions outside the training step split their work by the thread count: a cell published at
+    # one thread re-runs at one thread, and the budget is put back afterwards
+    import os
+
+    import torch
+
+    from gsbench.grids.verify import published_threads, thread_budget
+    assert published_threads({"provenance": {"torch_threads": 1}}) == 1
+    assert published_threads({"provenance": {"torch_threads": True}}) is None
+    assert published_threads({"provenance": {"torch_threads": 0}}) is None
+    assert published_threads({}) is None
+    monkeypatch.delenv("GSBENCH_THREADS", raising=False)
+    before = torch.get_num_threads()
+    with thread_budget(1):
+        assert os.environ["GSBENCH_THREADS"] == "1" and os.environ["MKL_NUM_THREADS"] == "1"
+        assert torch.get_num_threads() == 1
+    assert "GSBENCH_THREADS" not in os.environ and torch.get_num_threads() == before
+    with thread_budget(None):
+        assert "GSBENCH_THREADS" not in os.environ

@@ -72,3 +72,44 @@ def test_gaussiands_keeps_its_depth_terms_with_auto_on_points_and_drops_them_wit
     _, dropped = resolve_for_scene(copy.deepcopy(cfg), _neither())
     assert "priors.depth.provider=auto" in dropped["gaussiands.losses.depth"]
     assert "gaussiands.losses.ds" in dropped
+
+
+# ----------------------------------------------------------------------------- the default, and run ids
+def test_auto_is_the_default_and_settles_to_the_concrete_provider_s_run_id():
+    from gsbench.config import run_id
+    cfg = load_config("gaussiands")
+    assert cfg["priors"]["depth"]["provider"] == "auto"
+    gt = load_config("gaussiands", None, ["priors.depth.provider=gt"])
+    sfm = load_config("gaussiands", None, ["priors.depth.provider=sfm"])
+    with_depth, points_only = make_sphere_scene(2, *SIZE), _points_only()
+    # unsettled, the rule has its own id; settled, the id of what it chose on that scene
+    assert run_id(cfg, "fp") != run_id(gt, "fp")
+    settled = D.settle_depth_rule(cfg, with_depth)
+    assert settled["priors"]["depth"]["provider"] == "auto"       # the config keeps the rule it was given
+    assert settled["resolved"] == {"priors.depth.provider": "gt"}
+    assert run_id(settled, "fp") == run_id(gt, "fp")
+    assert run_id(D.settle_depth_rule(cfg, points_only), "fp") == run_id(sfm, "fp")
+    none = D.settle_depth_rule(cfg, _neither())
+    assert none["resolved"]["priors.depth.provider"] == "none"
+    assert run_id(none, "fp") not in (run_id(gt, "fp"), run_id(sfm, "fp"))
+    # an explicit provider is left alone
+    assert D.settle_depth_rule(gt, points_only) is gt
+
+
+def test_a_stored_settlement_that_is_not_a_provider_name_is_ignored_by_the_id():
+    from gsbench.config import run_id
+    cfg = load_config("gaussiands")
+    bad = {**cfg, "resolved": {"priors.depth.provider": ["gt"]}}
+    assert run_id(bad, "fp") == run_id(cfg, "fp")
+
+
+def test_grid_planning_settles_auto_on_a_generated_scene_without_generating_it():
+    from gsbench.config import run_id
+    from gsbench.grids.grid_file import SceneSpec
+    from gsbench.grids.planning import settle_on_spec
+    cfg = load_config("gaussiands")
+    gt = load_config("gaussiands", None, ["priors.depth.provider=gt"])
+    assert run_id(settle_on_spec(cfg, SceneSpec(preset="tabletop-medium")), "fp") == run_id(gt, "fp")
+    # a folder scene that is not here stays unsettled: no published cell can match it by accident
+    missing = SceneSpec(path="/nonexistent/scan")
+    assert settle_on_spec(cfg, missing) is cfg

@@ -171,3 +171,14 @@ def test_a_claim_in_an_undeclared_regime_gets_its_own_column(tmp_path: Path):
                       grid=grid, metrics={"psnr": 23.0 + 0.1 * s}, config_extra=with_grid(_config(views=9), grid))
     t = matrix_table(claim_rows(Results(collect(tmp_path / "a"))))
     assert t.columns[-1].header().startswith("other: tabletop-medium-0, 9 views, cpu-medium")
+
+
+def test_a_cell_whose_depth_provider_was_auto_is_in_the_regime_of_what_auto_chose():
+    from gsbench.reports.regimes import regime_of
+    base = {"priors": {"depth": {"provider": "auto", "distortion": 1.0}, "masks": {"provider": "gt"},
+                       "features": {"provider": "text-aligned"}}, "train": {"views": 3}}
+    settled = {**base, "resolved": {"priors.depth.provider": "gt"}}
+    explicit = {**base, "priors": {**base["priors"], "depth": {"provider": "gt", "distortion": 1.0}}}
+    assert regime_of(settled, "s") == regime_of(explicit, "s")
+    assert regime_of(settled, "s").depth == "gt" and regime_of(settled, "s").depth_distortion == 1.0
+    assert regime_of(base, "s").depth == "auto"   # never settled: its own regime, matching no declared one

@@ -133,7 +133,7 @@ def test_a_verdict_that_fails_holm_or_had_a_second_look_says_so(tmp_path: Path, 
     assert sps.ttest_1samp(mm, 0.0).pvalue < 0.05
     rows = _rows(res)
     assert rows["min-max beats raw L1 depth (PSNR)"][3].startswith(SMALLER + " (fails Holm): at most +")
-    later = _rows(res, later=frozenset({"depth_formulation"}))
+    later = _rows(res, later=frozenset(res.run_ids(study="depth_formulation")))
     assert later["scale-shift beats raw L1 depth (PSNR)"][3] == REPRODUCED + " (after a second look)"
     assert later["min-max beats raw L1 depth (PSNR)"][3].startswith(SMALLER + " (fails Holm; after a second look):")
     # an inconclusive verdict rejects nothing: never qualified
@@ -142,7 +142,8 @@ def test_a_verdict_that_fails_holm_or_had_a_second_look_says_so(tmp_path: Path, 
 
 def test_verdict_counts_keep_the_qualifications(tmp_path: Path, no_gc):
     _formulation_runs(tmp_path, SHIFTS)
-    t = claims_table(Results(collect(tmp_path)), later=frozenset({"depth_formulation"}))[0]
+    res = Results(collect(tmp_path))
+    t = claims_table(res, later=frozenset(res.run_ids(study="depth_formulation")))[0]
     summary = verdict_summary(t)
     assert "reproduced 1 (after a second look 1)" in summary
     assert "smaller than claimed 1 (fails Holm 1; after a second look 1)" in summary

@@ -152,7 +152,7 @@ def test_missing_row_is_not_run(tmp_path: Path):
                   grid={"priors.ordering": "random"}, metrics={"ordering_adjacent_mask_iou_strict": 0.3 + 0.02 * s})
     got = rows_by_key(Results(collect(tmp_path)))
     assert got["ordering_pose_random"][1] == REPRODUCED  # +20, +19 points
-    assert got["ordering_pose_filename"] == ("n/a (reference row not run or not evaluated)", NOT_RUN)
+    assert got["ordering_pose_filename"] == ("n/a (reference row not run)", NOT_RUN)
 
 
 def test_lambda_correlations(tmp_path: Path):
@@ -194,7 +194,7 @@ def test_noise_robustness_uses_the_highest_severity(tmp_path: Path):
     # severity 5 (the highest), not 1: blur -2 dB (reproduced), gaussian -0.1 dB inside the 0.5 dB margin
     assert got["noise_motion_blur"][1] == REPRODUCED and got["noise_motion_blur"][0].startswith("-2.01 [")
     assert got["noise_gaussian"][1] == REPRODUCED and got["noise_gaussian"][0].startswith("-0.11 [")
-    assert got["noise_poisson"] == ("n/a (compared row not run or not evaluated)", NOT_RUN)
+    assert got["noise_poisson"] == ("n/a (compared row not run)", NOT_RUN)
 
 
 def _loss_runs(root: Path) -> pd.DataFrame:
