@@ -338,16 +338,24 @@ def _has_key(cfg: Any, key: str) -> bool:
         return False
 
 
+def settled_value(cfg: Mapping, key: str) -> Optional[str]:
+    """What the scene-decided rule at `key` (SCENE_RESOLVED_KEYS) chose, as the config's `resolved`
+    section records it; None when it records no name there."""
+    settled = cfg.get("resolved") if isinstance(cfg.get("resolved"), dict) else {}
+    value = settled.get(key)
+    return value if isinstance(value, str) else None
+
+
 def canonical(cfg: dict) -> dict:
     """The config as far as it decides what a run computes: without the keys that only say where things
     are kept (NON_RESULT_KEYS), without the NULL_DEFAULT_KEYS left null, without bookkeeping (dropped,
     resolved, scene, run_id), without another method's own section and without the shared sections its
     method does not read. The one form both hashes below read."""
     c = copy.deepcopy(cfg)
-    settled = c.get("resolved") if isinstance(c.get("resolved"), dict) else {}
     for key in SCENE_RESOLVED_KEYS:
-        if isinstance(settled.get(key), str) and _has_key(c, key):
-            set_dotted(c, key, settled[key])
+        chosen = settled_value(c, key)
+        if chosen is not None and _has_key(c, key):
+            set_dotted(c, key, chosen)
     for path in NON_RESULT_KEYS:
         d = c
         for p in path[:-1]:
@@ -396,6 +404,7 @@ __all__ = [
     "setting",
     "config_key",
     "canonical",
+    "settled_value",
     "upgrade_config",
     "upgrade_key",
     "parse_overrides",

@@ -362,8 +362,7 @@ def ratio_text(d: Diff) -> str:
     s = f"ratio {math.exp(d.delta):.2f}"
     if d.has_interval:
         s += f" [{math.exp(d.lo):.2f}, {math.exp(d.hi):.2f}]" + (" *" if d.significant else "")  # type: ignore[arg-type]
-    tag = f"n={d.n_a}, paired" if d.method == "paired" else f"n={d.n_a} vs {d.n_b}"
-    return s + f" ({tag}{d.dropped_text()})"
+    return s + d.tag()
 
 
 def _unmeasured(res: Results, rids: list[str], metric: str | None, side: str) -> Measured:
@@ -375,15 +374,16 @@ def _unmeasured(res: Results, rids: list[str], metric: str | None, side: str) ->
     return Measured(f"n/a ({side}: {reason})", f"{NOT_MEASURED}: {reason}")
 
 
-def holm_qualify(measured: list[tuple[Claim, Measured]], later: frozenset[int] = frozenset()) -> int:
-    """Holm across every test of every row (`Measured.tests`: the family is fixed by the rules, not by
-    the verdicts); a verdict is qualified '(fails Holm)' when a hypothesis it rejects has a Holm p above
-    ALPHA, and '(after a second look)' when its row's index is in `later` (a cell of the row came from a
-    grid that got seeds after a look at its results). Sets each row's p / Holm p (those its verdict rests
-    on, else its zero / TOST test) in place; returns the family's size."""
-    family = [(m, name, p) for _c, m in measured for name, p in m.tests.items()]
+def holm_qualify(rows: list[ClaimRow]) -> int:
+    """Holm across every test of every measured row (`Measured.tests`: the family is fixed by the rules,
+    not by the verdicts); a verdict is qualified '(fails Holm)' when a hypothesis it rejects has a Holm p
+    above ALPHA, and '(after a second look)' when the row is `looked` (a cell of it came from a grid that
+    got seeds after a look at its results). Sets each row's p / Holm p (those its verdict rests on, else
+    its zero / TOST test) in place; returns the family's size."""
+    measured = [(r.measured, r.looked) for r in rows if r.measured is not None]
+    family = [(m, name, p) for m, _looked in measured for name, p in m.tests.items()]
     adjusted = {(id(m), name): hp for (m, name, _p), hp in zip(family, holm([p for _m, _n, p in family]))}
-    for i, (_c, m) in enumerate(measured):
+    for m, looked in measured:
         base = m.verdict.split(":", 1)[0]
         rests = m.rests if base in REJECTING else ()
         shown = [n for n in rests if n in m.tests] or [n for n in ("zero", "tost") if n in m.tests][:1]
@@ -393,7 +393,7 @@ def holm_qualify(measured: list[tuple[Claim, Measured]], later: frozenset[int] =
         if base not in REJECTING:
             continue
         fails = any(adjusted.get((id(m), n), 1.0) > ALPHA for n in rests)
-        notes = ([FAILS_HOLM] if fails else []) + ([SECOND_LOOK] if i in later else [])
+        notes = ([FAILS_HOLM] if fails else []) + ([SECOND_LOOK] if looked else [])
         m.verdict = qualified(m.verdict, notes)
     return len(family)
 
@@ -446,9 +446,7 @@ def claim_rows(res: Results, claims: list[Claim] | None = None,
             if guard.blind and m.no_effect and not m.verdict.startswith(BLIND):
                 m.verdict = guard.blind
             rows.append(ClaimRow(c, regime, regime_cell(regime, pr, kinds), guard, m, bool(later & set(gids))))
-    measured = [r for r in rows if r.measured is not None]
-    looked = frozenset(i for i, r in enumerate(measured) if r.looked)
-    holm_qualify([(r.claim, r.measured) for r in measured], looked)
+    holm_qualify(rows)
     return rows
 
 

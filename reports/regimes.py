@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from gsbench import rundir
-from gsbench.config import CONFIG_DIR, preset_path, shipped_presets
+from gsbench.config import CONFIG_DIR, preset_path, settled_value, shipped_presets
 from gsbench.methods.gaussiands.study_table import REGIMES, DeclaredRegime, Regime
 from gsbench.reports.data import Results, is_null
 from gsbench.reports.studies import PROTOCOL_SHORT
@@ -68,9 +68,8 @@ def regime_of(config: Any, scene: str) -> Regime:
     config = config if isinstance(config, dict) else {}
     priors = config.get("priors") if isinstance(config.get("priors"), dict) else {}
     depth = _provider(priors, "depth")
-    settled = config.get("resolved") if isinstance(config.get("resolved"), dict) else {}
-    if depth == "auto" and isinstance(settled.get("priors.depth.provider"), str):
-        depth = settled["priors.depth.provider"]   # what `auto` chose on the cell's scene (gsbench.config)
+    if depth == "auto":   # what `auto` chose on the cell's scene, when the config records it
+        depth = settled_value(config, "priors.depth.provider") or depth
     dist = (priors.get("depth") or {}).get("distortion") if isinstance(priors.get("depth"), dict) else None
     distortion = float(dist) if depth == "gt" and isinstance(dist, (int, float)) and math.isfinite(dist) else None
     train = config.get("train") if isinstance(config.get("train"), dict) else {}

@@ -80,8 +80,12 @@ class Diff:
                 s += " *"
         else:
             s += f" [n/a: {self.reason}]"
-        tag = f"n={self.n_a}, paired" if self.method == "paired" else f"n={self.n_a} vs {self.n_b}"
-        return s + f" ({tag}{self.dropped_text()})"
+        return s + self.tag()
+
+    def tag(self) -> str:
+        """' (n=3, paired)' / ' (n=3 vs 4)', with the seeds left out."""
+        n = f"n={self.n_a}, paired" if self.method == "paired" else f"n={self.n_a} vs {self.n_b}"
+        return f" ({n}{self.dropped_text()})"
 
     def dropped_text(self) -> str:
         """'; dropped seeds 1, 4' (and runs without a seed), or '' when every value was used."""

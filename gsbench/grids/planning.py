@@ -22,16 +22,25 @@ CACHE_DIRNAME = rundir.CACHE_DIRNAME
 SCENES_DIRNAME = "scenes"
 
 
+def scene_folder(spec: SceneSpec) -> tuple[Path, str]:
+    """A folder scene's path with `~` and environment variables expanded, and why it cannot be used
+    ('' when it is a folder here)."""
+    p = Path(os.path.expandvars(os.path.expanduser(spec.path or "")))
+    if "$" in str(p):
+        return p, f"scene {spec.path!r}: unset environment variable in the path"
+    if not p.is_dir():
+        return p, f"scene {p}: folder not found"
+    return p, ""
+
+
 def resolve_scene(spec: SceneSpec, runs_dir: Path, create: bool = True) -> Optional[Path]:
     """A scene folder for `spec`: presets are generated once into RUNS_DIR/scenes/<preset>-<seed>
     (into a temp folder renamed into place, so concurrent or killed runs never see half a scene).
     With create=False a missing preset scene gives None."""
     if spec.path:
-        p = Path(os.path.expandvars(os.path.expanduser(spec.path)))
-        if "$" in str(p):
-            raise InputError(f"scene {spec.path!r}: unset environment variable in the path")
-        if not p.is_dir():
-            raise InputError(f"scene {p}: folder not found")
+        p, why = scene_folder(spec)
+        if why:
+            raise InputError(why)
         return p.resolve()
     out = (runs_dir / SCENES_DIRNAME / spec.folder_name()).resolve()
     if out.is_dir():
@@ -94,16 +103,8 @@ class PlannedCell:
 def missing_scene_folders(grid: Grid) -> list[str]:
     """Why each folder scene of `grid` is not here (an unset variable in its path, or no such folder);
     [] when every scene can be resolved (presets are generated)."""
-    out = []
-    for spec in {json.dumps(c.scene.to_dict(), sort_keys=True): c.scene for c in grid.cells()}.values():
-        if not spec.path:
-            continue
-        p = os.path.expandvars(os.path.expanduser(spec.path))
-        if "$" in p:
-            out.append(f"scene {spec.path!r}: unset environment variable in the path")
-        elif not Path(p).is_dir():
-            out.append(f"scene {p}: folder not found")
-    return out
+    specs = {json.dumps(c.scene.to_dict(), sort_keys=True): c.scene for c in grid.cells()}.values()
+    return [why for why in (scene_folder(s)[1] for s in specs if s.path) if why]
 
 
 @dataclass(frozen=True)
@@ -122,8 +123,8 @@ def settle_on_spec(config: dict, spec: SceneSpec) -> dict:
         return config
     if spec.preset:
         return settle_depth_rule(config, GeneratedSceneFacts())
-    folder = Path(os.path.expandvars(os.path.expanduser(spec.path or "")))
-    return settle_depth_rule(config, load_scene(folder)) if spec.path and folder.is_dir() else config
+    folder, why = scene_folder(spec)
+    return settle_depth_rule(config, load_scene(folder)) if spec.path and not why else config
 
 
 def plan(grid: Grid, runs_dir: Path, create_scenes: bool = True) -> list[PlannedCell]:
