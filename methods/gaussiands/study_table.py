@@ -135,7 +135,8 @@ DECLARED: tuple[Study, ...] = (
                     {AX_ORDERING: "pose"}, {AX_ORDERING: "filename"}))),
     Study("depth_formulation", "Depth supervision formulation", ("gaussiands.depth_formulation",),
           {"gaussiands.depth_formulation": "scale_shift"}, "scale-shift aligned depth (the paper's method)",
-          claims_grids=("depth_formulation-cpu", "depth_formulation-fewview-cpu"), claims=(
+          claims_grids=("depth_formulation-cpu", "depth_formulation-fewview-cpu",
+                        "depth_formulation-real-cpu"), claims=(
               _formulation("depth_ss_raw_psnr", "scale-shift beats raw L1 depth (PSNR)", "psnr", "scale_shift",
                            "raw_l1", 24.81, 21.31, "dB"),
               _formulation("depth_mm_raw_psnr", "min-max beats raw L1 depth (PSNR)", "psnr", "minmax", "raw_l1",
@@ -147,7 +148,7 @@ DECLARED: tuple[Study, ...] = (
               _formulation("depth_ss_mm_mbiou", "scale-shift beats min-max depth (mBIoU)", "mbiou", "scale_shift",
                            "minmax", 91.99, 89.21, "%"))),
     Study("loss_subsets", "Loss subsets", _LOSSES, {k: True for k in _LOSSES},
-          "all three losses on (the paper's full objective)", claims_grids=("loss_subsets-cpu",), claims=(
+          "all three losses on (the paper's full objective)", claims_grids=("loss_subsets-cpu", "loss_subsets-fewview-cpu"), claims=(
               Claim("loss_depth_psnr", "L_depth alone raises PSNR over no auxiliary loss", _TAB_ABL, "psnr", +1,
                     gap(22.46, 16.02), "22.46 vs 16.02 dB", {**_NONE, AX_LOSSES[0]: True}, _NONE),
               Claim("loss_ds_miou", "L_ds alone raises mIoU over no auxiliary loss", _TAB_ABL, "miou", +1,
@@ -167,7 +168,7 @@ DECLARED: tuple[Study, ...] = (
                     "Pearson r", correlation="axis.gaussiands.lambdas.sem"))),
     Study("latent_dim", "Latent dimension d", ("semantic.latent_dim", "method"),
           {"method": "gaussiands", "semantic.latent_dim": 3}, "d = 3 (the paper's default)",
-          claims_grids=("latent_dim-cpu",), claims=(
+          claims_grids=("latent_dim-cpu", "latent_dim-fewview-cpu"), claims=(
               Claim("latent_16_3", "mIoU rises from d = 3 to d = 16", _DIMS, "miou", +1, gap(_D[16], _D[3]),
                     f"{_D[16]:.2f} vs {_D[3]:.2f} %",
                     {"method": "gaussiands", AX_LATENT: 16}, {"method": "gaussiands", AX_LATENT: 3}),
@@ -175,7 +176,8 @@ DECLARED: tuple[Study, ...] = (
                     f"{_D[32]:.2f} vs {_D[16]:.2f} %",
                     {"method": "gaussiands", AX_LATENT: 32}, {"method": "gaussiands", AX_LATENT: 16}))),
     Study("depth_noise", "Depth-noise robustness", _NOISE, {_NOISE[0]: None, _NOISE[1]: 0},
-          "the clean depth prior (severity 0)", claims_grids=("depth_noise-cpu", "depth_noise-fewview-cpu"), claims=(
+          "the clean depth prior (severity 0)", claims_grids=("depth_noise-cpu", "depth_noise-fewview-cpu",
+                                                                       "depth_noise-real-cpu"), claims=(
               Claim("noise_motion_blur", "motion blur on the depth prior lowers PSNR (the most of the four kinds)",
                     _FIG_NOISE, "psnr", -1, None, "figure only, no number",
                     {AX_NOISE_TYPE: "motion_blur", AX_NOISE_SEVERITY: MAX}, _NOISE_CLEAN),
@@ -209,6 +211,18 @@ DECLARED: tuple[Study, ...] = (
     Study("control_ds", "Control: edge-averaged L_ds with capped Gaussians", ("gaussiands.losses.ds",),
           kind="control", claims_grids=("control_ds-cpu",), controls=(
               Control("ds_mbiou", "capped Gaussians, edge-averaged L_ds raises mBIoU", "mbiou", +1,
+                      (AX_LOSSES[2],), {AX_LOSSES[2]: False},
+                      ("loss_ds_miou", "loss_ds_mbiou", "seg_3dovs_mbiou_twostage", "seg_3dovs_mbiou_grouping"),
+                      DS_INPUTS),)),
+    # the real capture's own controls, in the capture's regime: it has no exact depth, so the L_depth control
+    # takes the claims' own prior; each is its own Holm family, so it neither dilutes nor borrows the synthetic ones
+    Study("control_depth_real", "Control: L_depth on the real capture", ("gaussiands.lambdas.depth",), kind="control",
+          claims_grids=("control_depth_real-cpu",), controls=(
+              Control("depth_psnr_real", "the capture: L_depth with the capture's own prior raises held-out PSNR",
+                      "psnr", +1, (AX_LAMBDAS[0],), _NO_DEPTH, _DEPTH_CLAIMS),)),
+    Study("control_ds_real", "Control: edge-averaged L_ds with capped Gaussians on the real capture",
+          ("gaussiands.losses.ds",), kind="control", claims_grids=("control_ds_real-cpu",), controls=(
+              Control("ds_mbiou_real", "the capture, capped Gaussians: edge-averaged L_ds raises mBIoU", "mbiou", +1,
                       (AX_LOSSES[2],), {AX_LOSSES[2]: False},
                       ("loss_ds_miou", "loss_ds_mbiou", "seg_3dovs_mbiou_twostage", "seg_3dovs_mbiou_grouping"),
                       DS_INPUTS),)),
