@@ -126,7 +126,7 @@ DECLARED: tuple[Study, ...] = (
           {"method": "gaussiands"}, "GaussianDS (the paper's method) on the same scene", main=True,
           claims_grids=("headline-cpu", "headline-fewview-cpu", "headline-real-cpu"), claims=_headline_claims()),
     Study("ordering", "Pseudo-video ordering", ("priors.ordering",), {"priors.ordering": "pose"},
-          "pose-nearest ordering (the paper's method)", claims_grids=("ordering-cpu",), claims=(
+          "pose-nearest ordering (the paper's method)", claims_grids=("ordering-cpu", "ordering-fewview-cpu"), claims=(
               Claim("ordering_pose_random", "pose-nearest ordering raises adjacent mask IoU over random", _ORDER_TAB,
                     "ordering_adjacent_mask_iou_strict", +1, gap(53.21, 33.92), "53.21 vs 33.92 %",
                     {AX_ORDERING: "pose"}, {AX_ORDERING: "random"}),
@@ -211,6 +211,12 @@ DECLARED: tuple[Study, ...] = (
     Study("control_ds", "Control: edge-averaged L_ds with capped Gaussians", ("gaussiands.losses.ds",),
           kind="control", claims_grids=("control_ds-cpu",), controls=(
               Control("ds_mbiou", "capped Gaussians, edge-averaged L_ds raises mBIoU", "mbiou", +1,
+                      (AX_LOSSES[2],), {AX_LOSSES[2]: False},
+                      ("loss_ds_miou", "loss_ds_mbiou", "seg_3dovs_mbiou_twostage", "seg_3dovs_mbiou_grouping"),
+                      DS_INPUTS),)),
+    Study("control_ds_fewview", "Control: edge-averaged L_ds with capped Gaussians at 3 views",
+          ("gaussiands.losses.ds",), kind="control", claims_grids=("control_ds_fewview-cpu",), controls=(
+              Control("ds_mbiou_fewview", "3 views, capped Gaussians: edge-averaged L_ds raises mBIoU", "mbiou", +1,
                       (AX_LOSSES[2],), {AX_LOSSES[2]: False},
                       ("loss_ds_miou", "loss_ds_mbiou", "seg_3dovs_mbiou_twostage", "seg_3dovs_mbiou_grouping"),
                       DS_INPUTS),)),
