@@ -7,6 +7,7 @@ Indices `i` are positions in `cameras` (the sorted image list of the layout).
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from typing import Callable, Optional
 
@@ -66,6 +67,12 @@ class Scene:
     def has_points(self) -> bool:
         return self.points is not None and len(self.points) > 0
 
+    def points_digest(self) -> Optional[str]:
+        """The sparse points' identity, recorded with every run: the scene fingerprint covers images and
+        cameras only, and the points (the initialisation) of a triangulated capture differ between
+        triangulations. None without points."""
+        return point_set_digest(self.points) if self.has_points else None
+
     @property
     def has_depth(self) -> bool:
         return self.depth_loader is not None
@@ -123,3 +130,10 @@ class Scene:
     def gt_class_masks(self, i: int) -> Optional[dict]:
         """3D-OVS per-class bool masks {class name: H x W} of view i (overlaps kept), or None."""
         return None if self.class_masks_loader is None else self.class_masks_loader(i)
+
+
+def point_set_digest(points: np.ndarray) -> str:
+    """First 16 hex digits of the sha256 of the points' xyz as float64, rows sorted (row order does not count)."""
+    xyz = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    xyz = xyz[np.lexsort(xyz.T[::-1])]
+    return hashlib.sha256(np.ascontiguousarray(xyz).tobytes()).hexdigest()[:16]

@@ -17,7 +17,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                  "poses_bounds.npy or transforms.json) and images/")
     parser.add_argument("--layout", default="auto", help="scene layout (default: detected)")
     parser.add_argument("--force", action="store_true", help="replace sparse points the scene already has")
-    parser.add_argument("--seed", type=int, default=0, help="seed of COLMAP's triangulation (default 0)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of every RANSAC in verification and triangulation: "
+                                                             "same machine + same seed, same points (default 0)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -45,5 +46,6 @@ def run(args: argparse.Namespace) -> int:
     write_json_atomic(args.scene / "sparse" / "points_provenance.json", summary)
     print(f"wrote {len(tri.points)} points to {model_dir} from {len(tri.views)} training views: mean track length "
           f"{summary['mean_track_length']:.2f}, reprojection error mean {summary['mean_reprojection_error_px']:.3f} px "
-          f"(max {summary['max_reprojection_error_px']:.3f} px over {errs.size} observations)")
+          f"(max {summary['max_reprojection_error_px']:.3f} px over {errs.size} observations); "
+          f"points digest {summary['points_digest']} (seed {args.seed})")
     return 0

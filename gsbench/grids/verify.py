@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from gsbench import rundir
-from gsbench.datasets import scene_fingerprint
+from gsbench.datasets import load_scene, scene_fingerprint
 from gsbench.environment import cpu_facts
 from gsbench.errors import InputError
 from gsbench.grids.grid_file import SceneSpec
@@ -83,6 +83,7 @@ def _rerun(cell: Published, work: Path) -> dict[str, Any]:
     if fp != rec["scene_fingerprint"]:
         raise RuntimeError(f"scene {scene.label} generated again has fingerprint {fp[:12]}, the cell's is "
                            f"{str(rec['scene_fingerprint'])[:12]}")
+    _check_points(scene_path, rec, cell)
     config = copy.deepcopy(rec["config"])
     if isinstance(config.get("priors"), dict):
         config["priors"]["cache_dir"] = str((work / rundir.CACHE_DIRNAME).resolve())
@@ -95,6 +96,20 @@ def _rerun(cell: Published, work: Path) -> dict[str, Any]:
     if out["state"] != "done":
         raise RuntimeError(f"the re-run {out['state']}: {out.get('error')}")
     return read_json(run_dir / rundir.RESULTS)
+
+
+def _check_points(scene_path: Path, rec: dict, cell: Published) -> None:
+    """A capture's sparse points come from `gsbench points`: a re-run on other points is another
+    initialisation, so it is refused with both digests. Cells written before the digest was recorded
+    carry none, and the re-run is not checked (the report's numbers then judge it)."""
+    want = ((rec.get("config") or {}).get("scene") or {}).get("points")
+    if not isinstance(want, str):
+        return
+    have = load_scene(scene_path).points_digest()
+    if have != want:
+        raise RuntimeError(f"{cell.path}: the scene at {scene_path} has sparse points {have or 'none'}, the cell "
+                           f"was trained from points {want}; for a capture, `gsbench points {scene_path} --force "
+                           f"--seed 0` writes the points one seed gives on this machine")
 
 
 def published_threads(rec: dict) -> int | None:

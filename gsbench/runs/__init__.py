@@ -90,7 +90,8 @@ def _train_run(config: dict, scene_path: Path, run_dir: Path, progress: bool) ->
         return run_dir
     scene = scene or _load_scene(scene_path)
     cfg, dropped = resolve_for_scene(config, scene)
-    cfg["scene"] = {"path": str(scene_path.resolve()), "name": scene.name, "fingerprint": fp}
+    cfg["scene"] = {"path": str(scene_path.resolve()), "name": scene.name, "fingerprint": fp,
+                    "points": scene.points_digest()}   # the initialisation: outside the fingerprint
     cfg["run_id"] = rid
     if dropped:
         log.warning("%s", dropped_line(dropped))

@@ -148,7 +148,8 @@ DECLARED: tuple[Study, ...] = (
               _formulation("depth_ss_mm_mbiou", "scale-shift beats min-max depth (mBIoU)", "mbiou", "scale_shift",
                            "minmax", 91.99, 89.21, "%"))),
     Study("loss_subsets", "Loss subsets", _LOSSES, {k: True for k in _LOSSES},
-          "all three losses on (the paper's full objective)", claims_grids=("loss_subsets-cpu", "loss_subsets-fewview-cpu"), claims=(
+          "all three losses on (the paper's full objective)",
+          claims_grids=("loss_subsets-cpu", "loss_subsets-fewview-cpu"), claims=(
               Claim("loss_depth_psnr", "L_depth alone raises PSNR over no auxiliary loss", _TAB_ABL, "psnr", +1,
                     gap(22.46, 16.02), "22.46 vs 16.02 dB", {**_NONE, AX_LOSSES[0]: True}, _NONE),
               Claim("loss_ds_miou", "L_ds alone raises mIoU over no auxiliary loss", _TAB_ABL, "miou", +1,

@@ -126,3 +126,18 @@ def test_a_rerun_uses_the_thread_count_the_cell_was_published_with(monkeypatch):
     assert "GSBENCH_THREADS" not in os.environ and torch.get_num_threads() == before
     with thread_budget(None):
         assert "GSBENCH_THREADS" not in os.environ
+
+
+def test_a_rerun_on_other_sparse_points_is_refused_with_both_digests(tiny_scene, tmp_path):
+    # the points are a capture's initialisation and sit outside the scene fingerprint: the cell records them
+    from gsbench.datasets import load_scene
+    from gsbench.datasets.base import point_set_digest
+    points = load_scene(tiny_scene).points
+    assert points is not None and len(points) > 10
+    cell = Published(tmp_path / "c.json", {})
+    rec = {"config": {"scene": {"points": point_set_digest(points)}}}
+    verify_mod._check_points(tiny_scene, rec, cell)        # the same points: no complaint
+    verify_mod._check_points(tiny_scene, {"config": {"scene": {}}}, cell)   # an older cell records none
+    moved = point_set_digest(points[1:])
+    with pytest.raises(RuntimeError, match=f"sparse points {point_set_digest(points)}.*from points {moved}"):
+        verify_mod._check_points(tiny_scene, {"config": {"scene": {"points": moved}}}, cell)

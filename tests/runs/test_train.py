@@ -1,11 +1,15 @@
 """Training through gsbench.runs.train_run on a tiny synthetic scene: the run folder contract,
 idempotence, non-finite handling, resume."""
+import hashlib
+import re
+
 import numpy as np
 import pytest
 import torch
 from render_faults import fail_render_at
 
 from gsbench.config import load_config
+from gsbench.datasets import load_scene
 from gsbench.errors import InputError, NonFiniteError
 from gsbench.runs import train_run
 from gsbench.store import load_torch, read_json, read_jsonl
@@ -38,6 +42,11 @@ def test_run_folder_contract(gds_run):
     assert st["state"] == "done"
     c = read_json(run / "config.json")
     assert c["method"] == "gaussiands" and len(c["run_id"]) == 16 and c["scene"]["fingerprint"]
+    # the sparse points (the initialisation) sit outside the fingerprint: the run records their digest
+    points = load_scene(c["scene"]["path"]).points
+    assert re.fullmatch(r"[0-9a-f]{16}", c["scene"]["points"])
+    assert c["scene"]["points"] == hashlib.sha256(np.ascontiguousarray(
+        np.asarray(points, np.float64)[np.lexsort(np.asarray(points, np.float64).T[::-1])]).tobytes()).hexdigest()[:16]
     assert c["dropped"] == {}                      # the synthetic scene feeds every term
     log = read_jsonl(run / "train_log.jsonl")
     loss_rows = [r for r in log if "loss" in r]
