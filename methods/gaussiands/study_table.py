@@ -149,7 +149,7 @@ DECLARED: tuple[Study, ...] = (
                            "minmax", 91.99, 89.21, "%"))),
     Study("loss_subsets", "Loss subsets", _LOSSES, {k: True for k in _LOSSES},
           "all three losses on (the paper's full objective)",
-          claims_grids=("loss_subsets-cpu", "loss_subsets-fewview-cpu"), claims=(
+          claims_grids=("loss_subsets-cpu", "loss_subsets-fewview-cpu", "loss_subsets-real-cpu"), claims=(
               Claim("loss_depth_psnr", "L_depth alone raises PSNR over no auxiliary loss", _TAB_ABL, "psnr", +1,
                     gap(22.46, 16.02), "22.46 vs 16.02 dB", {**_NONE, AX_LOSSES[0]: True}, _NONE),
               Claim("loss_ds_miou", "L_ds alone raises mIoU over no auxiliary loss", _TAB_ABL, "miou", +1,
@@ -169,7 +169,7 @@ DECLARED: tuple[Study, ...] = (
                     "Pearson r", correlation="axis.gaussiands.lambdas.sem"))),
     Study("latent_dim", "Latent dimension d", ("semantic.latent_dim", "method"),
           {"method": "gaussiands", "semantic.latent_dim": 3}, "d = 3 (the paper's default)",
-          claims_grids=("latent_dim-cpu", "latent_dim-fewview-cpu"), claims=(
+          claims_grids=("latent_dim-cpu", "latent_dim-fewview-cpu", "latent_dim-real-cpu"), claims=(
               Claim("latent_16_3", "mIoU rises from d = 3 to d = 16", _DIMS, "miou", +1, gap(_D[16], _D[3]),
                     f"{_D[16]:.2f} vs {_D[3]:.2f} %",
                     {"method": "gaussiands", AX_LATENT: 16}, {"method": "gaussiands", AX_LATENT: 3}),
