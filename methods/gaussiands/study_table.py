@@ -162,7 +162,7 @@ DECLARED: tuple[Study, ...] = (
                     f"{_ABL} (loss decomposition) and Sec. Boundary-Aware Semantic Segmentation", "mbiou", +1,
                     None, "no number given", _ALL, {**_ALL, AX_LOSSES[2]: False}, inputs=DS_INPUTS))),
     Study("lambda_grid", "Lambda grid (hyper-parameter sensitivity)", _LAMBDAS,
-          claims_grids=("lambda_grid-cpu",), claims=(
+          claims_grids=("lambda_grid-cpu", "lambda_grid-fewview-cpu", "lambda_grid-real-cpu"), claims=(
               Claim("lambda_depth_r", "lambda_depth correlates negatively with mIoU", _SWEEP, "miou", -1, -0.89,
                     "Pearson r", correlation="axis.gaussiands.lambdas.depth"),
               Claim("lambda_sem_r", "lambda_sem correlates positively with mIoU", _SWEEP, "miou", +1, 0.69,
