@@ -2,7 +2,7 @@
 
     gsbench publish RUNS --to results/cpu          add the finished cells of the claims plan in RUNS
     gsbench publish --status [results/cpu]         current / stale cells per grid
-    gsbench publish --page docs/claims.md --from results/cpu --readme README.md [--check]
+    gsbench publish --page docs/claims.md --from results/cpu [results/gpu] --readme README.md [--check]
     gsbench publish --upgrade [results/cpu]        rewrite cells of an older config layout or store format
 
 RUNS is a `gsbench claims --out` folder. A cell whose config is not the plan's, or that another
@@ -14,7 +14,16 @@ import argparse
 from pathlib import Path
 
 from gsbench.errors import InputError, shorten
-from gsbench.grids.store import classify, format_store_status, plan_for, publish, read_store, repo_store
+from gsbench.grids.store import (
+    classify,
+    format_store_status,
+    plan_for,
+    plan_on_backend,
+    publish,
+    read_store,
+    repo_store,
+    store_backend,
+)
 from gsbench.grids.store_format import STORE_VERSION
 from gsbench.grids.store_upgrade import upgrade_store
 from gsbench.store import read_text_bounded
@@ -32,8 +41,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "cells of an older store format (default: the repository's results/cpu)")
     parser.add_argument("--page", type=Path, default=None, metavar="PAGE",
                         help="generate the claims page (figures in PAGE without .md/) from the store")
-    parser.add_argument("--from", dest="source", type=Path, default=None, metavar="STORE",
-                        help="the store the page is generated from (default: the repository's results/cpu)")
+    parser.add_argument("--from", dest="source", type=Path, nargs="+", default=None, metavar="STORE",
+                        help="the store the page is generated from (default: the repository's results/cpu); "
+                             "further stores (another backend's, e.g. results/gpu) add an 'Across backends' "
+                             "section comparing their verdicts with the first's")
     parser.add_argument("--readme", type=Path, default=None,
                         help="with --page: regenerate the claims block of this README too")
     parser.add_argument("--check", action="store_true",
@@ -68,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
         return _status(_store(args.status, "--status"), grids)
     if args.upgrade is not None:
         return _upgrade(_store(args.upgrade, "--upgrade"), grids)
-    return _page(args, _store(args.source, "--from"), grids)
+    sources = args.source or [None]
+    return _page(args, _store(sources[0], "--from"), grids, sources[1:])
 
 
 def _publish(runs: Path, store: Path, grids: list) -> int:
@@ -105,7 +117,7 @@ def _status(store: Path, grids: list) -> int:
     return 0
 
 
-def _page(args: argparse.Namespace, store: Path, grids: list) -> int:
+def _page(args: argparse.Namespace, store: Path, grids: list, others: list[Path]) -> int:
     from gsbench.reports.claims_page import (  # lazy: start-up
         MAX_PAGE_BYTES,
         README_BEGIN,
@@ -124,7 +136,12 @@ def _page(args: argparse.Namespace, store: Path, grids: list) -> int:
         if readme is not None:
             readme_with_block(readme, README_BEGIN, shorten(args.readme))
     current, stale = classify(read_store(store), grids)
-    page = build_page(current, stale, grids, figure_folder(args.page).name)
+    other_cells = []
+    for p in others:            # another backend's store, against the plan on its backend
+        cells = read_store(p)
+        backend = store_backend(cells, p)
+        other_cells.append((str(p), backend, classify(cells, plan_on_backend(grids, backend))[0]))
+    page = build_page(current, stale, grids, figure_folder(args.page).name, other_cells)
     if not args.check:
         for p in write_page(page, args.page, args.readme):
             print(f"wrote {p}")

@@ -22,7 +22,7 @@ import datetime as _dt
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Optional
 
@@ -145,6 +145,22 @@ class Stale:
 
 def _scene_key(scene: Any) -> str:
     return json.dumps(scene, sort_keys=True, default=str)
+
+
+def store_backend(cells: list[Published], where: Path) -> str:
+    """The one backend (`config.backend`) that produced a store's cells; an error naming the store when
+    its cells disagree or none records one (a store holds one backend's cells)."""
+    found = {(c.record.get("config") or {}).get("backend") for c in cells}
+    if len(found) != 1 or None in found:
+        raise InputError(f"{shorten(where)}: expected the cells of one backend, found "
+                         f"{', '.join(sorted(str(b) for b in found)) or 'no cell'}")
+    return str(found.pop())
+
+
+def plan_on_backend(grids: list[Grid], backend: str) -> list[Grid]:
+    """The plan's grids with `backend` added to each base.set, as scripts/gpu_claims.py runs them on a
+    GPU: another backend's cells have their own run ids, so its store is classified against this plan."""
+    return [replace(g, base_set={**g.base_set, "backend": backend}) for g in grids]
 
 
 def classify(cells: list[Published], grids: list[Grid]) -> tuple[list[Published], list[Stale]]:

@@ -21,7 +21,7 @@ import tempfile
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Sequence
 
 from gsbench import rundir
 from gsbench.datasets import load_scene, scene_fingerprint
@@ -64,10 +64,28 @@ class CellCheck:
                 f"this machine {cpu_facts().get('cpu_model') or 'unknown'})")
 
 
-def draw(cells: list[Published], k: int, seed: int) -> list[Published]:
-    """K cells of today's numerics version, drawn at random with `seed` (all of them when fewer)."""
+def draw(cells: list[Published], k: int, seed: int, grids: Sequence[str] = ()) -> list[Published]:
+    """K cells of today's numerics version, drawn at random with `seed` (all of them when fewer). With
+    `grids`, only from those grids and spread over them in turn (the i-th cell from grid i mod n), so
+    K = n checks one cell of each named grid, e.g. one grid per regime."""
     pool = sorted((c for c in cells if c.numerics_version == NUMERICS_VERSION), key=lambda c: (c.grid, c.run_id))
-    return random.Random(seed).sample(pool, min(max(k, 0), len(pool)))
+    rng = random.Random(seed)
+    if not grids:
+        return rng.sample(pool, min(max(k, 0), len(pool)))
+    unknown = sorted(set(grids) - {c.grid for c in pool})
+    if unknown:
+        raise InputError(f"--grids: no published cell of numerics version {NUMERICS_VERSION} in "
+                         f"{', '.join(unknown)} (grids in the store: {', '.join(sorted({c.grid for c in pool}))})")
+    queues = []
+    for g in dict.fromkeys(grids):
+        cells_g = [c for c in pool if c.grid == g]
+        queues.append(rng.sample(cells_g, len(cells_g)))
+    out: list[Published] = []
+    while len(out) < max(k, 0) and any(queues):
+        for q in queues:
+            if q and len(out) < k:
+                out.append(q.pop(0))
+    return out
 
 
 def _rerun(cell: Published, work: Path) -> dict[str, Any]:
@@ -171,10 +189,10 @@ def verify_cell(cell: Published, work: Path, cells: list[Published]) -> CellChec
     return check
 
 
-def verify(cells: list[Published], k: int, seed: int) -> list[CellCheck]:
-    """Draw K cells and check each in its own temporary folder."""
+def verify(cells: list[Published], k: int, seed: int, grids: Sequence[str] = ()) -> list[CellCheck]:
+    """Draw K cells (from `grids` in turn, when named) and check each in its own temporary folder."""
     out = []
-    for cell in draw(cells, k, seed):
+    for cell in draw(cells, k, seed, grids):
         with tempfile.TemporaryDirectory(prefix="gsbench-verify-") as tmp:
             out.append(verify_cell(cell, Path(tmp), cells))
     return out
