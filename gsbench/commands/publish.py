@@ -18,7 +18,7 @@ from gsbench.grids.store import (
     classify,
     format_store_status,
     plan_for,
-    plan_on_backend,
+    plan_of_store,
     publish,
     read_store,
     repo_store,
@@ -112,6 +112,7 @@ def _upgrade(store: Path, grids: list) -> int:
 
 def _status(store: Path, grids: list) -> int:
     cells = read_store(store)
+    grids = plan_of_store(grids, cells, store)         # another backend's store: the plan on its backend
     current, stale = classify(cells, grids)
     print(format_store_status(cells, current, stale, grids))
     return 0
@@ -139,8 +140,7 @@ def _page(args: argparse.Namespace, store: Path, grids: list, others: list[Path]
     other_cells = []
     for p in others:            # another backend's store, against the plan on its backend
         cells = read_store(p)
-        backend = store_backend(cells, p)
-        other_cells.append((str(p), backend, classify(cells, plan_on_backend(grids, backend))[0]))
+        other_cells.append((str(p), store_backend(cells, p), classify(cells, plan_of_store(grids, cells, p))[0]))
     page = build_page(current, stale, grids, figure_folder(args.page).name, other_cells)
     if not args.check:
         for p in write_page(page, args.page, args.readme):

@@ -163,6 +163,16 @@ def plan_on_backend(grids: list[Grid], backend: str) -> list[Grid]:
     return [replace(g, base_set={**g.base_set, "backend": backend}) for g in grids]
 
 
+def plan_of_store(grids: list[Grid], cells: list[Published], where: Path) -> list[Grid]:
+    """The plan a store is checked against: `grids` as they are when the store holds the backend they
+    resolve to (or nothing), else the plan on the store's one backend (`plan_on_backend`)."""
+    if not cells:
+        return grids
+    backend = store_backend(cells, where)
+    planned = {g.base_tree().get("backend") for g in grids}
+    return grids if planned == {backend} else plan_on_backend(grids, backend)
+
+
 def classify(cells: list[Published], grids: list[Grid]) -> tuple[list[Published], list[Stale]]:
     """(current, stale) cells against the plan of `grids` and today's numerics version.
 

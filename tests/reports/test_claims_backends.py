@@ -74,7 +74,7 @@ def _across(page: Path) -> dict[str, str]:
     return {r[0].lstrip("| "): r[-1].rstrip(" |") for r in rows}
 
 
-def test_the_same_verdicts_agree_and_a_flipped_one_differs(tmp_path):
+def test_the_same_verdicts_agree_and_a_flipped_one_differs(tmp_path, capsys):
     cpu = _copy(tmp_path / "cpu")
     page = tmp_path / "page" / "claims.md"
     page.parent.mkdir()
@@ -84,6 +84,10 @@ def test_the_same_verdicts_agree_and_a_flipped_one_differs(tmp_path):
     assert got == {RISES: AGREE, "mIoU falls from d = 16 to d = 32": AGREE}
     text = page.read_text(encoding="utf-8")
     assert f"--from results/cpu {same}" in text and "results/cpu (cpu)" in text and f"{same} (gsplat)" in text
+
+    capsys.readouterr()
+    assert main(["publish", "--status", str(same), "--grids", GRID]) == 0      # against the plan on gsplat
+    assert "9 published cells: 9 current, 0 stale" in capsys.readouterr().out
 
     flipped = _gsplat_store(tmp_path / "gpu_flipped", scale_d16=0.5)      # d 16 far below d 3 on "gsplat"
     assert main(["publish", "--page", str(page), "--from", str(cpu), str(flipped), "--grids", GRID]) == 0
