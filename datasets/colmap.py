@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from gsbench.camera import ROTATION_TOL, Camera, quaternion_matrix
+from gsbench.colmap_lib import import_pycolmap
 from gsbench.errors import InputError, shorten
 
 from .guard import RawCamera, build_cameras
@@ -69,7 +70,7 @@ def _refuse_duplicate_names(rec, images_file: Path) -> None:
 
 def read_colmap(model_dir: Path) -> tuple[dict[str, Camera], np.ndarray | None, np.ndarray | None, dict]:
     """Cameras by image name, sparse points (M x 3), point colours (M x 3 in [0, 1]), meta."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     model_dir = Path(model_dir)
     try:
@@ -123,7 +124,7 @@ def write_colmap(model_dir: Path, cameras: list[Camera], names: list[str], point
                  colors: np.ndarray | None = None, binary: bool = True) -> None:
     """Write a PINHOLE COLMAP model (one camera per image) with optional coloured points.
     Uses the rig / frame API of pycolmap >= 3.12."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     model_dir = Path(model_dir)
     model_dir.mkdir(parents=True, exist_ok=True)

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from gsbench.camera import Camera
+from gsbench.colmap_lib import import_pycolmap
 from gsbench.errors import InputError
 
 from .base import Scene, point_set_digest
@@ -67,7 +68,7 @@ def _seeded_options(seed: int) -> tuple:
     One thread everywhere: threads take pairs in a varying order, and the matcher is not guaranteed to
     give the same matches then. Measured on dtu_scan37 (42 views, 2 cores under load): 8.8-10.5 s
     against 8.1-8.7 s with the former 2 threads and unseeded verification."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = 1
@@ -87,7 +88,7 @@ def _seeded_options(seed: int) -> tuple:
 
 def triangulate_scene(scene: Scene, views: list[int] | None = None, seed: int = 0) -> Triangulation:
     """SIFT + exhaustive matching + triangulation from the scene's poses, on `views` (default: train views)."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     views = list(scene.train_ids if views is None else views)
     if len(views) < 2:

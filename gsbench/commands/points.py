@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gsbench.colmap_lib import import_pycolmap
 from gsbench.datasets import load_scene
 from gsbench.datasets.colmap import find_model_dir
 from gsbench.datasets.triangulate import triangulate_scene, write_points
@@ -23,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import numpy as np
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     pycolmap.logging.minloglevel = pycolmap.logging.WARNING  # COLMAP's per-image INFO lines would bury the summary
     scene = load_scene(args.scene, layout=args.layout)

@@ -41,6 +41,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from gsbench.camera import Camera
+from gsbench.colmap_lib import import_pycolmap
 from gsbench.datasets.colmap import find_model_dir
 from gsbench.errors import InputError
 from gsbench.priors.warp import NEAR
@@ -76,7 +77,7 @@ def point_tracks(scene) -> dict[int, np.ndarray] | None:
     model_dir = find_model_dir(Path(scene.path)) if scene.has_points else None
     if model_dir is None:
         return None
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     rec = pycolmap.Reconstruction(str(model_dir))
     pts = sorted(rec.points3D.items())

@@ -18,6 +18,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from gsbench.colmap_lib import import_pycolmap
 from gsbench.commands.hostile import Hostile, tiny_scene
 from gsbench.datasets.colmap import read_colmap
 from gsbench.datasets.imageio import EXIF_ORIENTATION
@@ -41,7 +42,7 @@ class Corruption:
 def _colmap(edit: Callable) -> Callable[[Path], None]:
     """A corruption that edits the scene's COLMAP model: `edit(reconstruction, image of VIEW)`."""
     def corrupt(scene: Path) -> None:
-        import pycolmap  # lazy: only the camera corruptions need it
+        pycolmap = import_pycolmap()  # lazy: only the camera corruptions need it
         model = scene / "sparse" / "0"
         rec = pycolmap.Reconstruction(str(model))
         (image,) = [im for im in rec.images.values() if im.name == VIEW]
@@ -57,7 +58,7 @@ def _set_params(values: list[float]) -> Callable:
 
 
 def _zero_quaternion(rec, image) -> None:
-    import pycolmap  # lazy: only the camera corruptions need it
+    pycolmap = import_pycolmap()  # lazy: only the camera corruptions need it
     frame = rec.frames[image.frame_id]
     pose = frame.rig_from_world
     pose.rotation = pycolmap.Rotation3d(np.zeros(4))
