@@ -126,7 +126,8 @@ DECLARED: tuple[Study, ...] = (
           {"method": "gaussiands"}, "GaussianDS (the paper's method) on the same scene", main=True,
           claims_grids=("headline-cpu", "headline-fewview-cpu", "headline-real-cpu"), claims=_headline_claims()),
     Study("ordering", "Pseudo-video ordering", ("priors.ordering",), {"priors.ordering": "pose"},
-          "pose-nearest ordering (the paper's method)", claims_grids=("ordering-cpu", "ordering-fewview-cpu"), claims=(
+          "pose-nearest ordering (the paper's method)", claims_grids=("ordering-cpu", "ordering-fewview-cpu",
+                                                                      "ordering-real-cpu"), claims=(
               Claim("ordering_pose_random", "pose-nearest ordering raises adjacent mask IoU over random", _ORDER_TAB,
                     "ordering_adjacent_mask_iou_strict", +1, gap(53.21, 33.92), "53.21 vs 33.92 %",
                     {AX_ORDERING: "pose"}, {AX_ORDERING: "random"}),
