@@ -70,7 +70,7 @@ def test_claims_list_and_unknown_grid(tmp_path, capsys):
     from gsbench.cli import main
     assert main(["claims", "--out", str(tmp_path / "r"), "--list"]) == 0
     out = capsys.readouterr().out
-    assert "control_depth-cpu" in out and "700 cells in 29 grids" in out
+    assert "control_depth-cpu" in out and "718 cells in 29 grids" in out
     assert main(["claims", "--out", str(tmp_path / "r"), "--grids", "tiny-test"]) == 1
     assert "not in the claims plan" in capsys.readouterr().err
     assert not (tmp_path / "r").exists()   # nothing planned or written
