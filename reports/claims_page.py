@@ -309,12 +309,13 @@ def _matrix_section(res: Results | None, rows: list[ClaimRow], kinds: dict[str, 
             *untestable_lines(res), "", controls_by_regime(res).to_markdown()]
 
 
-def _other_rows(cells: list[Published], grids: list[Grid], work: Path) -> list[ClaimRow]:
-    """Another store's claim rows, made as the page's own (for the across-backends section)."""
+def _store_rows(cells: list[Published], grids: list[Grid], work: Path) -> tuple[Results | None, list[ClaimRow]]:
+    """A store's collected results and claim rows (the rows of a grid that got later seeds qualified):
+    the page's own, and each other backend's for the across-backends section."""
     res = _results(cells, work)
     looked = {g.name for g in grids if g.later_seeds}
     later = frozenset(c.run_id for c in cells if c.grid in looked)
-    return claim_rows(res, later=later, kinds=scene_kinds(cells)) if res is not None else []
+    return res, (claim_rows(res, later=later, kinds=scene_kinds(cells)) if res is not None else [])
 
 
 def build_page(current: list[Published], stale: list[Stale], grids: list[Grid], figure_dir: str,
@@ -323,15 +324,13 @@ def build_page(current: list[Published], stale: list[Stale], grids: list[Grid], 
     `figure_dir` is the figures' folder relative to the page. `others`: (store, backend, current cells) of
     the stores of other backends, compared verdict by verdict in an 'Across backends' section."""
     with tempfile.TemporaryDirectory(prefix="gsbench-claims-page-") as tmp:
-        res = _results(current, Path(tmp))
-        looked = {g.name for g in grids if g.later_seeds}
-        later, kinds = frozenset(c.run_id for c in current if c.grid in looked), scene_kinds(current)
-        rows = claim_rows(res, later=later, kinds=kinds) if res is not None else []
+        res, rows = _store_rows(current, grids, Path(tmp))
+        kinds = scene_kinds(current)
         across, across_line = [], ""
         if others:
             mine = store_backend(current, Path(PRIMARY_STORE)) if current else "no cell"
             stores = [StoreRows(f"{PRIMARY_STORE} ({mine})", rows)]
-            stores += [StoreRows(f"{name} ({backend})", _other_rows(cells, grids, Path(tmp) / f"other{i}"))
+            stores += [StoreRows(f"{name} ({backend})", _store_rows(cells, grids, Path(tmp) / f"other{i}")[1])
                        for i, (name, backend, cells) in enumerate(others)]
             across, across_line = backends_section(stores)
         claims = (claims_table(res, kinds=kinds, rows=rows) if res is not None else []) or [empty_claims_table()]
