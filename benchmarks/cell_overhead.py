@@ -1,15 +1,17 @@
 """Benchmark: where a claims cell's wall time goes, and the same cells on another gsbench checkout.
 
     .venv/bin/python benchmarks/cell_overhead.py --grid control_sem-cpu [--seeds 0] [--tree DIR ...]
-                                                 [--work DIR] [--json out.json]
+                                                 [--jobs N] [--work DIR] [--json out.json]
 
 For each checkout (`--tree`, default: this one; each needs its own `.venv` with gsbench installed
 from it) it copies that checkout's grid file of the claims plan with only `--seeds`, runs it with
-`gsbench ablate --executor local --jobs 1` (a process per cell, as `gsbench claims` runs the plan)
+`gsbench ablate --executor local --jobs N` (a process per cell, as `gsbench claims` runs the plan; N = 1 by
+default, so the phases are those of a cell alone on the machine)
 and reads every cell's phases from its run folder: the cell's wall time (cell_status.json), training
 (train_summary.json `train_s`: priors, data and optimisation), evaluation (results.json `eval_s`)
 and the rest (process start, imports, config, run folder files). It prints one row per cell, the
-per-checkout means, the whole command's wall time, and each checkout's ratio to the first. Run it
+per-checkout means, the whole command's wall time (scene, shared priors and cells), the cells it finished
+per hour, and each checkout's ratio of command time to the first's. Run it
 on an otherwise idle machine: the times are wall times. The cells' numbers are not compared here
 (`gsbench verify` does that); the first checkout is the baseline.
 """
@@ -25,7 +27,7 @@ from pathlib import Path
 import yaml
 
 
-def run_tree(tree: Path, grid: str, seeds: list[int], work: Path) -> dict:
+def run_tree(tree: Path, grid: str, seeds: list[int], work: Path, jobs: int = 1) -> dict:
     """Run the trimmed grid with `tree`'s gsbench; its per-cell phases and the command's wall time."""
     raw = yaml.safe_load((tree / "gsbench" / "grids" / f"{grid}.yaml").read_text())
     raw["seeds"] = seeds
@@ -34,7 +36,7 @@ def run_tree(tree: Path, grid: str, seeds: list[int], work: Path) -> dict:
     grid_file.write_text(yaml.safe_dump(raw, sort_keys=False))
     t0 = time.perf_counter()
     subprocess.run([str(tree / ".venv" / "bin" / "gsbench"), "-q", "ablate", "--grid", str(grid_file), "--out",
-                    str(work / "runs"), "--executor", "local", "--jobs", "1", "--no-progress"], check=True)
+                    str(work / "runs"), "--executor", "local", "--jobs", str(jobs), "--no-progress"], check=True)
     wall = time.perf_counter() - t0
     cells = []
     for status in sorted((work / "runs").glob("*/cell_status.json")):
@@ -62,12 +64,15 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--tree", type=Path, nargs="+", default=[Path(__file__).resolve().parents[1]],
                     help="gsbench checkouts, each with its .venv; the first is the baseline")
+    ap.add_argument("--jobs", type=int, default=1, help="cells at a time (gsbench claims --jobs)")
     ap.add_argument("--work", type=Path, default=Path("cell_overhead_work"))
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
-    results = [run_tree(t.resolve(), args.grid, args.seeds, args.work / f"tree{i}") for i, t in enumerate(args.tree)]
+    results = [run_tree(t.resolve(), args.grid, args.seeds, args.work / f"tree{i}", args.jobs)
+               for i, t in enumerate(args.tree)]
+    print(f"jobs: {args.jobs}")
     print(f"{'checkout':40s} {'cells':>5s} {'cell s':>8s} {'train s':>8s} {'eval s':>8s} {'other s':>8s} "
-          f"{'command s':>9s} {'ratio':>6s}")
+          f"{'command s':>9s} {'cells/h':>7s} {'ratio':>6s}")
     base = results[0]["command_s"]
     for r in results:
         for c in r["cells"]:
@@ -75,7 +80,8 @@ def main() -> None:
                   f"{c['other_s']:8.1f}")
         s = summary(r)
         print(f"{r['tree'][-40:]:40s} {len(r['cells']):5d} {s['cell_s']:8.1f} {s['train_s']:8.1f} {s['eval_s']:8.1f} "
-              f"{s['other_s']:8.1f} {r['command_s']:9.1f} {r['command_s'] / base:6.2f}")
+              f"{s['other_s']:8.1f} {r['command_s']:9.1f} {3600 * len(r['cells']) / r['command_s']:7.1f} "
+              f"{r['command_s'] / base:6.2f}")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
 

@@ -14,7 +14,7 @@ from typing import Optional
 import torch
 
 from gsbench.config import setting
-from gsbench.methods.base import Method, Phases, fit_priors
+from gsbench.methods.base import Method, Phases, cache_dir_for, fit_priors
 from gsbench.methods.registry import uses
 from gsbench.methods.twostage_spec import budget, semantic_budget
 from gsbench.methods.vanilla import rgb_loss_fn
@@ -62,7 +62,7 @@ class TwoStage(Method):
         ae_state = (ckpt or {}).get("extra", {}).get("autoencoder") if (ckpt or {}).get("phase") == "semantic" else None
         self.autoencoder, self.info["autoencoder"], targets = semantic_targets(
             pri.masks, pri.mask_features, setting(config, "semantic.autoencoder"), d, int(setting(config, "seed")),
-            ae_state, {v: (W, H) for v in train_ids}, dev, data_on(config))
+            ae_state, {v: (W, H) for v in train_ids}, dev, data_on(config), cache_dir_for(config, run_dir))
         has_any = {v: bool(targets.has_target[v].any()) for v in train_ids}
         if rgb_field is None:
             sem_field0 = field_from_params(ckpt["params"])

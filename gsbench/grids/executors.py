@@ -2,13 +2,15 @@
 
 The grid code only calls `executor.map(fn, items)`; it does not know which executor runs it.
 
-- `LocalExecutor(jobs)`: a process pool (spawn context: no forked torch/OpenMP state) that starts a
-  fresh worker process for every cell (max_tasks_per_child=1), so no cell inherits the memory peak,
-  caches or torch state of an earlier one; each worker uses max(1, cores // jobs) torch threads so
-  `--jobs N` never oversubscribes the machine. On a CUDA machine each worker takes a GPU from a pool
-  of `jobs` slots (slot k on the (k % n)-th GPU this process sees) and gives it back when it exits.
-  A worker's CUDA_VISIBLE_DEVICES is that GPU's entry of the parent's own list (an index or a UUID),
-  so under CUDA_VISIBLE_DEVICES=2,3 the workers use GPUs 2 and 3, not 0 and 1.
+- `LocalExecutor(jobs)`: a process pool that starts a fresh worker process for every cell
+  (max_tasks_per_child=1), so no cell inherits the memory peak, caches or torch state of an earlier
+  one; each worker uses max(1, cores // jobs) threads (torch, numba, BLAS) so `--jobs N` never
+  oversubscribes the machine. Workers are forked from a forkserver that has imported gsbench, torch
+  and numba once (`WORKER_PRELOAD`) and run nothing: no thread pool, OpenMP team or CUDA context
+  exists there to be forked, and each cell starts without its ~3 s of imports. On a CUDA machine each
+  worker takes a GPU from a pool of `jobs` slots (slot k on the (k % n)-th GPU this process sees) and
+  gives it back when it exits. A worker's CUDA_VISIBLE_DEVICES is that GPU's entry of the parent's own
+  list (an index or a UUID), so under CUDA_VISIBLE_DEVICES=2,3 the workers use GPUs 2 and 3, not 0 and 1.
 - `SerialExecutor()`: in this process, one cell after another (debugging).
 - `SubmititExecutor(folder, cluster)`: submitit job arrays (`map_array`). cluster="slurm" submits
   to SLURM, cluster="local" runs each job as a local subprocess (used in the tests), "debug" runs
@@ -30,6 +32,8 @@ from tqdm import tqdm
 from gsbench.errors import InputError
 
 EXECUTORS = ("local", "submitit", "serial")
+# what the local executor's forkserver imports before it forks the workers (the cell and priors jobs' modules)
+WORKER_PRELOAD = ["gsbench", "gsbench.grids.running", "gsbench.grids.priors_share"]
 
 
 class SerialExecutor:
@@ -54,11 +58,14 @@ def _cpu_count() -> int:
 def _init_worker(threads: int, gpu_queue: Any) -> None:
     """Per-worker set-up: thread budget and (when there are GPUs) one GPU per worker.
 
-    The budget goes into OMP_NUM_THREADS / MKL_NUM_THREADS / GSBENCH_THREADS (torch reads the first
-    when it is imported); `apply_thread_budget()` calls torch.set_num_threads with it in the job."""
+    The budget goes into OMP_NUM_THREADS / MKL_NUM_THREADS / GSBENCH_THREADS (for what a cell starts);
+    the forkserver imported torch and numpy before it, so torch.set_num_threads (`apply_thread_budget()`)
+    and the BLAS and OpenMP pools' limits (threadpoolctl) apply it in this process."""
     os.environ["OMP_NUM_THREADS"] = str(threads)
     os.environ["MKL_NUM_THREADS"] = str(threads)
     os.environ["GSBENCH_THREADS"] = str(threads)
+    from threadpoolctl import threadpool_limits
+    threadpool_limits(limits=threads)
     if gpu_queue is not None:
         gpu = gpu_queue.get()
         os.environ["CUDA_VISIBLE_DEVICES"] = str(gpu)
@@ -79,7 +86,7 @@ def apply_thread_budget() -> Optional[int]:
 
 
 class LocalExecutor:
-    """A spawn-context process pool with `jobs` workers."""
+    """A forkserver-context process pool with `jobs` workers, one process per item."""
 
     name = "local"
 
@@ -94,7 +101,8 @@ class LocalExecutor:
         items = list(items)
         if not items:
             return []
-        ctx = get_context("spawn")
+        ctx = get_context("forkserver")
+        ctx.set_forkserver_preload(WORKER_PRELOAD)
         gpu_queue = None
         slots = gpu_slots(self.jobs, _gpu_count(), os.environ.get("CUDA_VISIBLE_DEVICES"))
         if slots:

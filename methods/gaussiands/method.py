@@ -23,7 +23,7 @@ import torch
 
 from gsbench.config import setting
 from gsbench.gaussians import GaussianField
-from gsbench.methods.base import Method, Phases, fit_priors
+from gsbench.methods.base import Method, Phases, cache_dir_for, fit_priors
 from gsbench.methods.gaussiands.spec import budget
 from gsbench.methods.registry import uses
 from gsbench.render import render
@@ -68,7 +68,8 @@ class GaussianDS(Method):
         targets = None
         d = int(setting(config, "semantic.latent_dim")) if use["semantics"] else 0
         if use["semantics"]:
-            targets = self._semantic_targets(pri, config, d, resume, {v: (W, H) for v in train_ids}, dev)
+            targets = self._semantic_targets(pri, config, d, resume, {v: (W, H) for v in train_ids}, dev,
+                                             cache_dir_for(config, run_dir))
         # ---- depth prior and its edges E_d (invariant to the per-iteration affine alignment, see losses.py)
         depth = pri.depth if use["depth_prior"] else None
         edges = {}
@@ -92,7 +93,8 @@ class GaussianDS(Method):
         self.info["device"] = str(dev)
         self.info["budget"] = budget(config)   # one joint phase: every step is appearance and semantics
 
-    def _semantic_targets(self, pri, config: dict, d: int, resume: Optional[dict], sizes: dict, dev):
+    def _semantic_targets(self, pri, config: dict, d: int, resume: Optional[dict], sizes: dict, dev,
+                          cache_dir: Path):
         """The autoencoder (trained once, frozen; restored from the checkpoint on resume) and the per-pixel
         latent targets it makes of the priors' masks and mask features."""
         if pri.masks is None or pri.mask_features is None:
@@ -101,7 +103,7 @@ class GaussianDS(Method):
         ae_state = (resume or {}).get("extra", {}).get("autoencoder")
         self.autoencoder, self.info["autoencoder"], targets = semantic_targets(
             pri.masks, pri.mask_features, setting(config, "semantic.autoencoder"), d, int(setting(config, "seed")),
-            ae_state, sizes, dev, data_on(config))
+            ae_state, sizes, dev, data_on(config), cache_dir)
         return targets
 
     def _depth_edges(self, depth: dict, e: dict, train_ids: list[int], dev, config: dict) -> dict:

@@ -5,7 +5,7 @@ import math
 import os
 
 import pytest
-from pool_jobs import worker_info
+from pool_jobs import worker_info, worker_pools
 
 from gsbench.grids.executors import LocalExecutor, SubmititExecutor, apply_thread_budget, make_executor
 
@@ -17,6 +17,16 @@ def test_local_pool_keeps_order_and_sets_threads():
     assert [o[0] for o in out] == [9, 1, 4]
     assert all(o[1] == "1" and o[2] == "1" for o in out)
     assert os.getpid() not in {o[3] for o in out}      # ran in worker processes
+
+
+def test_local_workers_fork_from_a_preloaded_server_and_take_the_budget():
+    """Workers are forked from the forkserver (not children of this process), one per item, and the
+    budget reaches torch and the BLAS / OpenMP pools the server had loaded with this process's settings."""
+    for threads in (1, 2):
+        out = LocalExecutor(jobs=1, threads=threads, progress=False).map(worker_pools, [0, 1])
+        assert len({o["pid"] for o in out}) == 2
+        assert all(o["ppid"] != os.getpid() and o["preloaded"] for o in out)
+        assert all(o["torch"] == threads and o["pools"] == [threads] for o in out), out
 
 
 def test_thread_budget_applies_to_torch(monkeypatch):

@@ -13,6 +13,7 @@ from bench_scripts import load_benchmark
 FAKE_GSBENCH = """#!/bin/sh
 # argv: -q ablate --grid FILE --out DIR ...: one finished cell per seed of the grid file
 grid="$4"; out="$6"
+mkdir -p "$out"; echo "$@" > "$out/argv.txt"
 for seed in $(grep -A1 '^seeds:' "$grid" | tail -n 1 | tr -dc '0-9 '); do
   d="$out/cell$seed"; mkdir -p "$d"
   echo '{"state": "done", "wall_s": 10.0}' > "$d/cell_status.json"
@@ -45,3 +46,11 @@ def test_cells_are_timed_by_phase_on_the_checkouts_own_grid(tmp_path):
     assert (cell["cell_s"], cell["train_s"], cell["eval_s"]) == (10.0, 6.5, 2.0)
     assert abs(cell["other_s"] - 1.5) < 1e-12
     assert bench.summary(res)["other_s"] == cell["other_s"] and res["command_s"] > 0
+
+
+def test_the_jobs_reach_the_ablate_command(tmp_path):
+    bench = load_benchmark("cell_overhead")
+    tree = _fake_tree(tmp_path / "tree")
+    res = bench.run_tree(tree, "g-cpu", [0, 1], tmp_path / "work", jobs=2)
+    argv = (tmp_path / "work" / "runs" / "argv.txt").read_text().split()
+    assert argv[argv.index("--jobs") + 1] == "2" and res["cells"]
