@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -49,19 +50,33 @@ def fit_autoencoder(mask_features: dict, ae_cfg: dict, latent_dim: int, seed: in
     key = _fit_key(feats, latent_dim, hidden, epochs, lr, seed)
     hit = cache.load("autoencoder", key)
     if hit is not None:
-        arrays, meta = hit
-        with torch.random.fork_rng(devices=[]):     # as the fit: the global generator is not drawn from
-            ae = FeatureAutoencoder(feats.shape[1], latent_dim, hidden)
-        ae.load_state_dict({k: torch.from_numpy(v) for k, v in arrays.items()})
-        ae.eval()
-        for p in ae.parameters():
-            p.requires_grad_(False)
-        log.info("autoencoder: the fit restored from %s", cache.entry("autoencoder", key))
-        return ae, dict(meta["stats"])
+        restored = _restore(hit, feats.shape[1], latent_dim, hidden)
+        if restored is not None:
+            log.info("autoencoder: the fit restored from %s", cache.entry("autoencoder", key))
+            return restored
+        log.warning("autoencoder: the cache entry %s does not hold this fit; replacing it with a new fit",
+                    cache.entry("autoencoder", key))
+        shutil.rmtree(cache.entry("autoencoder", key), ignore_errors=True)
     ae, stats = train_autoencoder(feats, latent_dim, hidden, epochs, lr, seed)
     if all(np.isfinite(v) for v in stats.values()):    # a diverged fit is not kept (JSON has no NaN)
         cache.save("autoencoder", key, {k: v.detach().cpu().numpy() for k, v in ae.state_dict().items()},
                    {"stats": stats})
+    return ae, stats
+
+
+def _restore(hit: tuple, in_dim: int, latent_dim: int, hidden: list[int]) -> Optional[tuple[FeatureAutoencoder, dict]]:
+    """The frozen autoencoder and fit statistics of a cache entry, or None when the entry does not hold them."""
+    arrays, meta = hit
+    with torch.random.fork_rng(devices=[]):     # as the fit: the global generator is not drawn from
+        ae = FeatureAutoencoder(in_dim, latent_dim, hidden)
+    try:
+        ae.load_state_dict({k: torch.from_numpy(v) for k, v in arrays.items()})
+        stats = dict(meta["stats"])
+    except (RuntimeError, KeyError, TypeError):
+        return None
+    ae.eval()
+    for p in ae.parameters():
+        p.requires_grad_(False)
     return ae, stats
 
 

@@ -59,6 +59,25 @@ def test_other_features_settings_or_seed_fit_anew(tmp_path):
     assert len(_entries(cache)) == 5
 
 
+def test_an_entry_that_does_not_hold_the_fit_is_replaced_and_said(tmp_path, caplog):
+    feats, cache = _features(), tmp_path / "cache"
+    new, stats = fit_autoencoder(feats, CFG, 3, seed=7, cache_dir=cache)
+    entry = cache / "autoencoder" / _entries(cache)[0]
+    with np.load(entry / "arrays.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays.pop(sorted(arrays)[0])                       # a weight missing: not this fit
+    np.savez_compressed(entry / "arrays.npz", **arrays)
+    with caplog.at_level(logging.WARNING, logger="gsbench.train.semantic_targets"):
+        again, again_stats = fit_autoencoder(feats, CFG, 3, seed=7, cache_dir=cache)
+    assert "replacing it with a new fit" in caplog.text and again_stats == stats
+    for k, v in new.state_dict().items():
+        assert torch.equal(again.state_dict()[k], v), k
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="gsbench.train.semantic_targets"):
+        fit_autoencoder(feats, CFG, 3, seed=7, cache_dir=cache)        # the new fit replaced the entry
+    assert "restored" in caplog.text and "replacing" not in caplog.text
+
+
 def test_two_runs_sharing_the_cache_train_the_same_bits(tiny_scene, tmp_path):
     """The second run restores the first's fit; its log and parameters equal the first's."""
     cfg = load_config("gaussiands", "cpu-small", [*TINY_SET, "train.densify.until_iter=20"])
