@@ -85,6 +85,17 @@ def priors_request(config: dict, scene) -> Optional[dict]:
     return req
 
 
+def autoencoder_request(config: dict, priors_req: Optional[dict]) -> Optional[dict]:
+    """The feature autoencoder's fit the cell will make from its priors (`priors_req`), or None. Methods that
+    read the shared `semantic` section fit it on the priors' mask features when semantics are on
+    (gsbench.train.semantic_targets); a grid makes each fit two or more cells share once, before them.
+    Were this to ask for another fit than the cell's, the cell would miss the cache and fit its own."""
+    if priors_req is None or not priors_req["need_sem"] or "semantic" not in get_spec(config["method"]).shared:
+        return None
+    return dict(priors_req, autoencoder=setting(config, "semantic.autoencoder"),
+                latent_dim=int(setting(config, "semantic.latent_dim")))
+
+
 def build_priors_request(config: dict, scene) -> Optional[dict]:
     """The request even when it asks for nothing (fit still orders the views); None without train views."""
     if isinstance(scene, (str, Path)):
@@ -102,4 +113,5 @@ def build_priors_request(config: dict, scene) -> Optional[dict]:
 
 
 __all__ = ["MethodSpec", "METHODS", "register", "unregister", "get_spec", "get_method", "method_sort_key", "uses",
-           "budget", "load_target", "resolve_for_scene", "priors_request", "build_priors_request"]
+           "budget", "load_target", "resolve_for_scene", "priors_request", "build_priors_request",
+           "autoencoder_request"]

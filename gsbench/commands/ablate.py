@@ -40,7 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true",
                         help="use an --out folder that holds files gsbench did not write there (they are left alone)")
     parser.add_argument("--no-shared-priors", action="store_true",
-                        help="do not compute priors shared by several cells once before the cells run")
+                        help="do not compute priors (and autoencoder fits) shared by several cells once before "
+                             "the cells run")
     parser.add_argument("--no-progress", action="store_true")
 
 

@@ -285,3 +285,25 @@ def test_priors_requests_group_cells_that_share_priors(own_tmp):
     assert two["per_frame"] is True and two["need_depth"] is False
     rnd = [r for k, r in reqs.items() if "random" in k][0]
     assert rnd["priors"]["ordering"] == "random" and json.dumps(rnd, sort_keys=True) not in gaussiands
+
+
+def test_shared_autoencoder_fits_are_the_ones_the_cells_restore(own_tmp):
+    """d = 3 and d = 6, each with L_tv on and off: two fits for four cells, made before the cells; the
+    cells find them (no cell adds an entry of its own) and each restores its fit."""
+    grid = grids.load_grid(_write_grid(
+        own_tmp / "g.yaml", base={"method": "gaussiands", "preset": "cpu-small",
+                                   "set": {"train.iterations": 5, "train.max_width": 32,
+                                           "semantic.autoencoder.epochs": 5}},
+        axes={"semantic.latent_dim": [3, 6], "gaussiands.losses.tv": [True, False]},
+        extra_cells=[{"method": "vanilla"}]))
+    planned = grids.plan(grid, own_tmp / "runs")
+    fits = [grids.autoencoder_request(pc.config, grids.priors_request(pc.spec())) for pc in planned]
+    assert sum(f is None for f in fits) == 1                             # vanilla fits none
+    assert len({json.dumps(f, sort_keys=True) for f in fits if f is not None}) == 2
+    lines = []
+    rep = grids.run_grid(grid, own_tmp / "runs", SerialExecutor(progress=False), log=lines.append)
+    assert all(r["state"] == "done" for r in rep.results), rep.results
+    assert any(line.startswith("shared autoencoder fits: 2 for 4 cells") for line in lines), lines
+    entries = [p for p in (own_tmp / "runs" / ".gsbench_cache" / "autoencoder").iterdir()
+               if not p.name.startswith(".")]
+    assert len(entries) == 2
