@@ -65,21 +65,23 @@ def _run_plan(args: argparse.Namespace, plan: list) -> int:
     executor = make_executor(args.executor, jobs=args.jobs, folder=args.out / ".submitit", cluster=args.cluster,
                              progress=not args.no_progress)
     store = None if args.no_store else args.store or repo_store()
-    t0, not_done = time.time(), 0
+    t0, not_done, runnable = time.time(), 0, []
     for g in plan:
         absent = missing_scene_folders(g)
         if absent:   # a capture that is not shipped (docs/real-captures.md): the rest of the plan still runs
             print(f"gsbench claims: grid {g.name} skipped: {absent[0]}", file=sys.stderr)
             not_done += len(g.cells())
             continue
-        try:
-            if store is not None:
-                reuse_published(g, args.out, store, log=print)
-            rep = grids.run_grid(g, args.out, executor, retry_failed=args.retry_failed, log=print)
-        except BrokenProcessPool as e:
-            print(f"gsbench claims: a worker process died ({e}); finished cells are saved, re-run to resume",
-                  file=sys.stderr)
-            return 1
+        if store is not None:
+            reuse_published(g, args.out, store, log=print)
+        runnable.append(g)
+    try:   # one dispatch for every grid: no core waits for a grid's last cell (grids.run_grids)
+        reports = grids.run_grids(runnable, args.out, executor, retry_failed=args.retry_failed, log=print)
+    except BrokenProcessPool as e:
+        print(f"gsbench claims: a worker process died ({e}); finished cells are saved, re-run to resume",
+              file=sys.stderr)
+        return 1
+    for rep in reports:
         rows = grids.planned_rows(rep.planned)
         not_done += sum(r["state"] != "done" for r in rows)
         for r in rep.results:

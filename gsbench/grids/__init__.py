@@ -45,7 +45,7 @@ from gsbench.grids.liveness import (CELL_FILE, CELL_STATUS_FILE, HEARTBEAT_S, ST
 from gsbench.grids.planning import (CACHE_DIRNAME, SCENES_DIRNAME, PlannedCell, cell_config, plan,  # isort: skip
                                     resolve_scene, write_manifest)
 from gsbench.grids.priors_share import autoencoder_request, prepare_priors_job, priors_request, shared_priors
-from gsbench.grids.running import GridReport, classify, run_cell, run_grid
+from gsbench.grids.running import GridReport, classify, run_cell, run_grid, run_grids
 from gsbench.grids.status import format_status, planned_rows, status_rows
 from gsbench.store import read_json
 
@@ -53,6 +53,6 @@ __all__ = ["write_failed_results", "CELL_FILE", "CELL_STATUS_FILE", "HEARTBEAT_S
            "STALE_AFTER_S", "cell_state", "pid_alive", "read_cell_status", "results_finished", "CACHE_DIRNAME",
            "SCENES_DIRNAME", "PlannedCell", "cell_config", "plan", "resolve_scene", "write_manifest",
            "prepare_priors_job", "priors_request", "autoencoder_request", "shared_priors", "GridReport", "classify",
-           "run_cell",
+           "run_cell", "run_grids",
            "run_grid", "GRID_DIR", "STUDIES", "Cell", "Grid", "SceneSpec", "find_grid", "load_grid",
            "parse_grid", "shipped_grids", "format_status", "planned_rows", "status_rows", "read_json"]

@@ -119,17 +119,40 @@ def classify(planned: list[PlannedCell]) -> dict[str, str]:
 def run_grid(grid: Grid, runs_dir: Path, executor: Any, retry_failed: bool = False,
              log: Callable[[str], None] = log_.info, share_priors: bool = True) -> GridReport:
     """Plan the grid, skip finished cells, compute shared priors once, dispatch the remaining cells
-    through `executor` (anything with `map(fn, items) -> list`), and return what happened.
+    through `executor` (anything with `map(fn, items) -> list`), and return what happened: `run_grids`
+    with one grid."""
+    return run_grids([grid], runs_dir, executor, retry_failed, log, share_priors)[0]
+
+
+def run_grids(grid_list: list[Grid], runs_dir: Path, executor: Any, retry_failed: bool = False,
+              log: Callable[[str], None] = log_.info, share_priors: bool = True) -> list[GridReport]:
+    """Several grids into one runs folder as one dispatch (gsbench claims): every grid is planned first,
+    the priors and fits their pending cells share are computed once, and all pending cells go to the
+    executor as one list, so a worker that finishes one grid's last cell starts the next grid's first
+    instead of idling until the grid is done. One GridReport per grid, in order.
 
     Holds RUNS_DIR's writer lock throughout: a second grid into the same folder fails at once (a
     RunLockedError naming this one); the cells lock their own run folders."""
     runs_dir = Path(runs_dir)
     with RunLock(runs_dir, what="runs folder"):
-        return _run_grid_locked(grid, runs_dir, executor, retry_failed, log, share_priors)
+        parts = [_pending(grid, runs_dir, retry_failed, log) for grid in grid_list]
+        todo = [pc for _, _, pending in parts for pc in pending]
+        if todo:    # gsplat's one-time CUDA build here, not in several workers at once
+            prebuild_for(pc.config for pc in todo)
+        if todo and share_priors:
+            shared_priors(todo, executor, log)
+        results = list(executor.map(run_cell, [pc.spec() for pc in todo])) if todo else []
+        reports, start = [], 0
+        for planned, states, pending in parts:
+            reports.append(GridReport(planned, states, [pc.run_id for pc in pending],
+                                      results[start:start + len(pending)]))
+            start += len(pending)
+        return reports
 
 
-def _run_grid_locked(grid: Grid, runs_dir: Path, executor: Any, retry_failed: bool,
-                     log: Callable[[str], None], share_priors: bool) -> GridReport:
+def _pending(grid: Grid, runs_dir: Path, retry_failed: bool,
+             log: Callable[[str], None]) -> tuple[list[PlannedCell], dict[str, str], list[PlannedCell]]:
+    """The grid's planned cells (manifest written), their states, and those to run now."""
     planned = plan(grid, runs_dir)
     states = classify(planned)
     write_manifest(grid, runs_dir, planned)
@@ -148,9 +171,4 @@ def _run_grid_locked(grid: Grid, runs_dir: Path, executor: Any, retry_failed: bo
     log(f"grid {grid.name}: {len(planned)} cells; " + ", ".join(f"{k} {v}" for k, v in counts.items() if v)
         + f"; dispatching {len(todo)}" + ("" if retry_failed or not counts["failed"]
                                           else " (failed cells skipped; use --retry-failed)"))
-    if todo:    # gsplat's one-time CUDA build here, not in several workers at once
-        prebuild_for(pc.config for pc in todo)
-    if todo and share_priors:
-        shared_priors(todo, executor, log)
-    results = executor.map(run_cell, [pc.spec() for pc in todo]) if todo else []
-    return GridReport(planned, states, [pc.run_id for pc in todo], list(results))
+    return planned, states, todo

@@ -102,6 +102,39 @@ def test_skip_failed_retry_and_stale(tmp_path, monkeypatch):
     assert manifest["axis_keys"] == ["train.lr.color", "train.lambda_dssim"]
 
 
+class RecordingExecutor:
+    """Records every map call's items and runs them one after another (the fake runner below)."""
+
+    def __init__(self) -> None:
+        self.calls: list[list[str]] = []
+
+    def map(self, fn, items):
+        items = list(items)
+        self.calls.append([Path(it["run_dir"]).name for it in items])
+        return [fn(it) for it in items]
+
+
+def test_grids_go_to_the_executor_as_one_dispatch(tmp_path, monkeypatch):
+    """gsbench claims hands every grid's pending cells to the executor in one list, so no worker waits
+    for a grid's last cell; each grid's report holds its own cells' results, in order."""
+    monkeypatch.setattr(grids.running, "_train_and_evaluate",
+                        lambda spec, run_dir, status: write_json_atomic(run_dir / "results.json", {"metrics": {}}))
+    a = grids.load_grid(_write_grid(tmp_path / "a.yaml"))
+    b = grids.load_grid(_write_grid(tmp_path / "b.yaml", study="tiny-b",
+                                    axes={"train.lr.color": [0.001, 0.002, 0.003]}))
+    out = tmp_path / "runs"
+    ids = [[pc.run_id for pc in grids.plan(g, out)] for g in (a, b)]
+    ex = RecordingExecutor()
+    reps = grids.run_grids([a, b], out, ex, log=lambda s: None)
+    assert ex.calls == [ids[0] + ids[1]]
+    assert [rep.dispatched for rep in reps] == ids
+    for rep, grid_ids in zip(reps, ids):
+        assert [Path(r["run_dir"]).name for r in rep.results] == grid_ids
+        assert all(r["state"] == "done" for r in rep.results)
+    again = grids.run_grids([a, b], out, ex, log=lambda s: None)      # all done: nothing dispatched
+    assert [rep.dispatched for rep in again] == [[], []] and len(ex.calls) == 1
+
+
 def test_cell_configs_share_cache_and_record_grid(tmp_path):
     grid = grids.load_grid(_write_grid(tmp_path / "g.yaml"))
     planned = grids.plan(grid, tmp_path / "runs")
