@@ -129,25 +129,23 @@ def run_grids(grid_list: list[Grid], runs_dir: Path, executor: Any, retry_failed
     """Several grids into one runs folder as one dispatch (gsbench claims): every grid is planned first,
     the priors and fits their pending cells share are computed once, and all pending cells go to the
     executor as one list, so a worker that finishes one grid's last cell starts the next grid's first
-    instead of idling until the grid is done. One GridReport per grid, in order.
+    instead of idling until the grid is done. A cell that two grids plan (the same run id) runs once and
+    is in both reports. One GridReport per grid, in order.
 
     Holds RUNS_DIR's writer lock throughout: a second grid into the same folder fails at once (a
     RunLockedError naming this one); the cells lock their own run folders."""
     runs_dir = Path(runs_dir)
     with RunLock(runs_dir, what="runs folder"):
         parts = [_pending(grid, runs_dir, retry_failed, log) for grid in grid_list]
-        todo = [pc for _, _, pending in parts for pc in pending]
+        todo = list({pc.run_id: pc for _, _, pending in parts for pc in pending}.values())
         if todo:    # gsplat's one-time CUDA build here, not in several workers at once
             prebuild_for(pc.config for pc in todo)
         if todo and share_priors:
             shared_priors(todo, executor, log)
-        results = list(executor.map(run_cell, [pc.spec() for pc in todo])) if todo else []
-        reports, start = [], 0
-        for planned, states, pending in parts:
-            reports.append(GridReport(planned, states, [pc.run_id for pc in pending],
-                                      results[start:start + len(pending)]))
-            start += len(pending)
-        return reports
+        ran = executor.map(run_cell, [pc.spec() for pc in todo]) if todo else []
+        results = dict(zip((pc.run_id for pc in todo), ran))
+        return [GridReport(planned, states, [pc.run_id for pc in pending], [results[pc.run_id] for pc in pending])
+                for planned, states, pending in parts]
 
 
 def _pending(grid: Grid, runs_dir: Path, retry_failed: bool,

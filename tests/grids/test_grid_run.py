@@ -135,6 +135,23 @@ def test_grids_go_to_the_executor_as_one_dispatch(tmp_path, monkeypatch):
     assert [rep.dispatched for rep in again] == [[], []] and len(ex.calls) == 1
 
 
+def test_a_cell_two_grids_plan_runs_once(tmp_path, monkeypatch):
+    """Grid by grid, the second grid found the first's cell done; in one dispatch the cell must still run
+    once (two workers would race for its folder), and both grids' reports hold its result."""
+    monkeypatch.setattr(grids.running, "_train_and_evaluate",
+                        lambda spec, run_dir, status: write_json_atomic(run_dir / "results.json", {"metrics": {}}))
+    a = grids.load_grid(_write_grid(tmp_path / "a.yaml"))
+    twin = grids.load_grid(_write_grid(tmp_path / "twin.yaml"))
+    out = tmp_path / "runs"
+    ids = [pc.run_id for pc in grids.plan(a, out)]
+    assert [pc.run_id for pc in grids.plan(twin, out)] == ids
+    ex = RecordingExecutor()
+    reps = grids.run_grids([a, twin], out, ex, log=lambda s: None)
+    assert ex.calls == [ids]
+    for rep in reps:
+        assert [Path(r["run_dir"]).name for r in rep.results] == ids and all(r["state"] == "done" for r in rep.results)
+
+
 def test_cell_configs_share_cache_and_record_grid(tmp_path):
     grid = grids.load_grid(_write_grid(tmp_path / "g.yaml"))
     planned = grids.plan(grid, tmp_path / "runs")
