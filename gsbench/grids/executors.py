@@ -6,8 +6,10 @@ The grid code only calls `executor.map(fn, items)`; it does not know which execu
   (max_tasks_per_child=1), so no cell inherits the memory peak, caches or torch state of an earlier
   one; each worker uses max(1, cores // jobs) threads (torch, numba, BLAS) so `--jobs N` never
   oversubscribes the machine. Workers are forked from a forkserver that has imported gsbench, torch
-  and numba once (`WORKER_PRELOAD`) and run nothing: no thread pool, OpenMP team or CUDA context
-  exists there to be forked, and each cell starts without its ~3 s of imports. On a CUDA machine each
+  and numba and loaded the cached numba kernels once (`WORKER_PRELOAD`, gsbench/grids/worker_preload.py)
+  and run nothing: no torch thread pool, OpenMP team or CUDA context exists there to be forked (numba's
+  tbb or workqueue pool is fork-safe), and each cell starts without its ~3 s of imports and ~1 s of
+  kernel loading. On a CUDA machine each
   worker takes a GPU from a pool of `jobs` slots (slot k on the (k % n)-th GPU this process sees) and
   gives it back when it exits. A worker's CUDA_VISIBLE_DEVICES is that GPU's entry of the parent's own
   list (an index or a UUID), so under CUDA_VISIBLE_DEVICES=2,3 the workers use GPUs 2 and 3, not 0 and 1.
@@ -32,8 +34,9 @@ from tqdm import tqdm
 from gsbench.errors import InputError
 
 EXECUTORS = ("local", "submitit", "serial")
-# what the local executor's forkserver imports before it forks the workers (the cell and priors jobs' modules)
-WORKER_PRELOAD = ["gsbench", "gsbench.grids.running", "gsbench.grids.priors_share"]
+# what the local executor's forkserver imports before it forks the workers (the cell and priors jobs'
+# modules, and the cached numba kernels)
+WORKER_PRELOAD = ["gsbench.grids.worker_preload"]
 
 
 class SerialExecutor:

@@ -4,8 +4,9 @@ from __future__ import annotations
 import math
 import os
 
+import numpy as np
 import pytest
-from pool_jobs import worker_info, worker_pools
+from pool_jobs import render_once, worker_info, worker_kernels, worker_pools
 
 from gsbench.grids.executors import LocalExecutor, SubmititExecutor, apply_thread_budget, make_executor
 
@@ -61,3 +62,18 @@ def test_make_executor_rejects_unknown():
         make_executor("dask")
     with pytest.raises(ValueError, match="cluster"):
         SubmititExecutor("x", cluster="pbs")
+
+
+def test_local_workers_start_with_the_cached_kernels_loaded():
+    """The forkserver loaded the kernels numba's cache holds (tests/conftest.py warms it), so a worker has
+    them before its first render, and its renders (threads forked after the kernels loaded) give this
+    process's bits."""
+    from gsbench.render import cpu_kernels
+    if not cpu_kernels.raster_forward.stats.cache_path:
+        pytest.skip("numba caching is off")
+    for threads in (1, 2):
+        out = LocalExecutor(jobs=1, threads=threads, progress=False).map(worker_kernels, [0, 1])
+        assert all(o["loaded"]["raster_forward"] >= 1 and o["loaded"]["raster_backward"] >= 1 for o in out), out
+        for seed, o in enumerate(out):
+            here = render_once(seed)
+            assert np.array_equal(o["rgb"], here["rgb"]) and np.array_equal(o["means_grad"], here["means_grad"])

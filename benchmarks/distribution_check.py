@@ -1,0 +1,140 @@
+"""Benchmark check: a change to the code leaves the claims' results unchanged in distribution.
+
+    .venv/bin/python benchmarks/distribution_check.py --tree BASE HEAD
+        [--grids control_sem-cpu depth_formulation-cpu] [--seeds 0 1 2 3 4] [--jobs 2]
+        [--metrics psnr miou_3dovs mbiou_3dovs] [--store results/cpu] [--work DIR] [--json out.json]
+
+Each checkout (`--tree`, each with its own `.venv`) runs its own copy of each grid file, trimmed to
+`--seeds`, with `gsbench ablate --executor local --jobs N` (as `gsbench claims` runs the plan). For
+every arm (a grid's cell over its seeds) and metric it prints the baseline's mean with its 95 %
+t-interval over the seeds, the head's mean, the difference of means, and whether the head's mean
+lies inside the baseline's interval; then how many cells gave the same value on both checkouts
+(`==`). A change that keeps the bits passes with every difference 0; a change of numerics must keep
+every head mean inside the baseline's interval (issue 52's rule). With `--store`, every head cell
+the published store also holds is compared with it value for value too.
+
+Not a timing: run it beside other work if need be. Exit status 1 when a head mean falls outside its
+interval.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+from scipy import stats
+
+METRICS = ("psnr", "miou_3dovs", "mbiou_3dovs")
+
+
+def run_tree(tree: Path, grid: str, seeds: list[int], work: Path, jobs: int) -> dict[str, dict]:
+    """Run `tree`'s grid file trimmed to `seeds`; {run_id: {"arm", "seed", "metrics"}} of its done cells."""
+    raw = yaml.safe_load((tree / "gsbench" / "grids" / f"{grid}.yaml").read_text())
+    raw["seeds"] = seeds
+    raw.pop("later_seeds", None)
+    work.mkdir(parents=True, exist_ok=True)
+    grid_file = work / f"{grid}.yaml"
+    grid_file.write_text(yaml.safe_dump(raw, sort_keys=False))
+    runs = work / "runs"
+    subprocess.run([str(tree / ".venv" / "bin" / "gsbench"), "-q", "ablate", "--grid", str(grid_file), "--out",
+                    str(runs), "--executor", "local", "--jobs", str(jobs), "--no-progress"], check=True)
+    plan = json.loads((runs / f"grid-{grid}.json").read_text())
+    out = {}
+    for cell in plan["cells"]:
+        results = runs / cell["run_id"] / "results.json"
+        if not results.is_file():
+            continue
+        arm = f"{grid} {cell['method']} " + " ".join(f"{k}={v}" for k, v in sorted(cell["axes"].items()))
+        out[cell["run_id"]] = {"arm": arm, "seed": cell["seed"],
+                               "metrics": json.loads(results.read_text()).get("metrics") or {}}
+    return out
+
+
+def interval(values: list[float]) -> tuple[float, float, float]:
+    """Mean and its 95 % t-interval (nan bounds for fewer than two values)."""
+    mean = statistics.fmean(values)
+    if len(values) < 2:
+        return mean, math.nan, math.nan
+    half = float(stats.t.ppf(0.975, len(values) - 1)) * statistics.stdev(values) / math.sqrt(len(values))
+    return mean, mean - half, mean + half
+
+
+def compare(base: dict, head: dict, metrics: list[str]) -> tuple[list[dict], int, int]:
+    """Per arm and metric: the baseline's interval, the head's mean and their difference; and the
+    count of (cell, metric) values equal on both, of those both have."""
+    rows, same, total = [], 0, 0
+    arms = sorted({c["arm"] for c in base.values()})
+    for arm in arms:
+        ids = sorted(r for r, c in base.items() if c["arm"] == arm and r in head)
+        for m in metrics:
+            pairs = [(base[r]["metrics"].get(m), head[r]["metrics"].get(m)) for r in ids]
+            pairs = [(b, h) for b, h in pairs if isinstance(b, (int, float)) and isinstance(h, (int, float))]
+            if not pairs:
+                continue
+            total += len(pairs)
+            same += sum(b == h for b, h in pairs)
+            mean, lo, hi = interval([b for b, _ in pairs])
+            head_mean = statistics.fmean(h for _, h in pairs)
+            inside = (lo <= head_mean <= hi) if not math.isnan(lo) else head_mean == mean
+            rows.append({"arm": arm, "metric": m, "n": len(pairs), "base_mean": mean, "lo": lo, "hi": hi,
+                         "head_mean": head_mean, "diff": head_mean - mean, "inside": inside})
+    return rows, same, total
+
+
+def against_store(head: dict, store: Path, metrics: list[str]) -> tuple[int, int]:
+    """(equal, compared) metric values of the head cells the published store also holds."""
+    same = total = 0
+    for run_id, cell in head.items():
+        hits = list(store.glob(f"*/{run_id}.json"))
+        if not hits:
+            continue
+        published = json.loads(hits[0].read_text())["results"]["metrics"]
+        for m in metrics:
+            b, h = published.get(m), cell["metrics"].get(m)
+            if isinstance(b, (int, float)) and isinstance(h, (int, float)):
+                total += 1
+                same += b == h
+    return same, total
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--tree", type=Path, nargs=2, required=True, help="baseline and head checkouts, each with .venv")
+    ap.add_argument("--grids", nargs="+", default=["control_sem-cpu", "depth_formulation-cpu"])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    ap.add_argument("--metrics", nargs="+", default=list(METRICS))
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--store", type=Path, default=None, help="a published store (e.g. results/cpu) to compare with")
+    ap.add_argument("--work", type=Path, default=Path("distribution_check_work"))
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+    cells = [{}, {}]
+    for i, tree in enumerate(args.tree):
+        for grid in args.grids:
+            cells[i].update(run_tree(tree.resolve(), grid, args.seeds, args.work / f"tree{i}" / grid, args.jobs))
+    rows, same, total = compare(cells[0], cells[1], args.metrics)
+    print(f"baseline {args.tree[0]}  head {args.tree[1]}  seeds {args.seeds}")
+    print(f"{'arm':60s} {'metric':12s} {'n':>2s} {'base mean':>10s} {'95% interval':>21s} {'head mean':>10s} "
+          f"{'diff':>10s} inside")
+    for r in rows:
+        inside = "yes" if r["inside"] else "NO"
+        print(f"{r['arm'][:60]:60s} {r['metric']:12s} {r['n']:2d} {r['base_mean']:10.4f} "
+              f"[{r['lo']:9.4f}, {r['hi']:9.4f}] {r['head_mean']:10.4f} {r['diff']:+10.2e} {inside}")
+    print(f"values equal on both checkouts: {same} of {total}")
+    report = {"trees": [str(t) for t in args.tree], "seeds": args.seeds, "rows": rows, "same": same, "total": total}
+    if args.store:
+        s_same, s_total = against_store(cells[1], args.store, args.metrics)
+        print(f"head values equal to the published store's ({args.store}): {s_same} of {s_total}")
+        report["store"] = {"same": s_same, "total": s_total}
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=1))
+    return 0 if all(r["inside"] for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
