@@ -63,7 +63,8 @@ def load_cached_kernels(modules: Optional[Iterable[ModuleType]] = None) -> int:
             for sig in _cached_signatures(dispatcher):
                 dispatcher.compile(sig)             # a cache hit: numba loads the entry, it does not compile
                 loaded += 1
-        except (AttributeError, TypeError, ValueError, OSError) as e:   # numba's cache internals changed
+        except Exception as e:   # noqa: BLE001  numba's cache internals changed, or an unreadable cache
+            # file: only the preload is lost, the kernel loads (or fails, with its error) on first call
             log.info("numba kernel %s not preloaded (%s: %s)", dispatcher.__name__, type(e).__name__, e)
     return loaded
 

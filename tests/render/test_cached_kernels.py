@@ -46,3 +46,18 @@ def test_loads_the_cached_kernels_without_compiling():
 def test_nothing_is_loaded_under_a_layer_that_is_not_fork_safe():
     got = _probe({**os.environ, "NUMBA_THREADING_LAYER": "omp"})
     assert got == {"before": 0, "loaded": 0, "after": 0, "misses": 0}
+
+
+def test_an_unreadable_cache_costs_only_the_preload(monkeypatch, caplog):
+    """A cache numba cannot read is logged and skipped: the kernels then load on first call."""
+    import logging
+
+    from gsbench.render import cached_kernels, cpu_kernels
+
+    def unreadable(dispatcher):
+        raise EOFError("truncated index")
+
+    monkeypatch.setattr(cached_kernels, "_cached_signatures", unreadable)
+    with caplog.at_level(logging.INFO, logger="gsbench.render.cached_kernels"):
+        assert cached_kernels.load_cached_kernels([cpu_kernels]) == 0
+    assert "raster_forward not preloaded (EOFError: truncated index)" in caplog.text
