@@ -10,8 +10,11 @@ every arm (a grid's cell over its seeds) and metric it prints the baseline's mea
 t-interval over the seeds, the head's mean, the difference of means, and whether the head's mean
 lies inside the baseline's interval; then how many cells gave the same value on both checkouts
 (`==`). A change that keeps the bits passes with every difference 0; a change of numerics must keep
-every head mean inside the baseline's interval (issue 52's rule). With `--store`, every head cell
-the published store also holds is compared with it value for value too.
+every head mean inside the baseline's interval (issue 52's rule). With `--store` (a published store,
+e.g. results/cpu) the head's arms are also set against the store's published seeds of the same
+setting (their mean and 95 % t-interval), and the head cells the store holds from this machine's CPU
+family are compared value for value. A finished cell is not run again: a second call with the same
+`--work` only prints.
 
 Not a timing: run it beside other work if need be. Exit status 1 when a head mean falls outside its
 interval.
@@ -49,7 +52,8 @@ def run_tree(tree: Path, grid: str, seeds: list[int], work: Path, jobs: int) -> 
         results = runs / cell["run_id"] / "results.json"
         if not results.is_file():
             continue
-        arm = f"{grid} {cell['method']} " + " ".join(f"{k}={v}" for k, v in sorted(cell["axes"].items()))
+        axes = " ".join(f"{k.rsplit('.', 1)[-1]}={v}" for k, v in sorted(cell["axes"].items()))
+        arm = f"{grid} {cell['method']} {axes}".strip()
         out[cell["run_id"]] = {"arm": arm, "seed": cell["seed"],
                                "metrics": json.loads(results.read_text()).get("metrics") or {}}
     return out
@@ -86,20 +90,57 @@ def compare(base: dict, head: dict, metrics: list[str]) -> tuple[list[dict], int
     return rows, same, total
 
 
-def against_store(head: dict, store: Path, metrics: list[str]) -> tuple[int, int]:
-    """(equal, compared) metric values of the head cells the published store also holds."""
-    same = total = 0
+def against_store(head: dict, store: Path, metrics: list[str]) -> tuple[list[dict], int, int]:
+    """The head's arms against the published store's cells of the same setting (gsbench's own store
+    reader, today's numerics version only): per arm and metric the store's mean and 95 % t-interval
+    over its published seeds, the head's mean over its seeds and their difference; and (equal,
+    compared) values of the head cells the store holds from this machine's CPU family. Cells
+    published on another CPU family are not compared value for value: their bits differ
+    (docs/training.md, "Reproducibility")."""
+    from gsbench.environment import cpu_facts
+    from gsbench.grids.seed_spread import setting_key
+    from gsbench.grids.store import read_store
+    from gsbench.grids.verify import same_cpu
+    from gsbench.numerics import NUMERICS_VERSION
+    cells = [c for c in read_store(store) if c.numerics_version == NUMERICS_VERSION]
+    by_id = {c.run_id: c for c in cells}
+    here = cpu_facts()
+    rows, same, total, arms = [], 0, 0, {}
     for run_id, cell in head.items():
-        hits = list(store.glob(f"*/{run_id}.json"))
-        if not hits:
+        published = by_id.get(run_id)
+        if published is None:
             continue
-        published = json.loads(hits[0].read_text())["results"]["metrics"]
+        arms.setdefault(setting_key(published.record), []).append(run_id)
+        if same_cpu(published.record["provenance"], here):
+            for m in metrics:
+                b, h = published.metrics.get(m), cell["metrics"].get(m)
+                if _number(b) and _number(h):
+                    total += 1
+                    same += b == h
+    for key, ids in arms.items():
+        setting = [c for c in cells if setting_key(c.record) == key]
+        models = sorted({str(c.record["provenance"].get("cpu_model")) for c in setting})
+        head_ids = [r for r, c in head.items() if c["arm"] == head[ids[0]]["arm"]]
         for m in metrics:
-            b, h = published.get(m), cell["metrics"].get(m)
-            if isinstance(b, (int, float)) and isinstance(h, (int, float)):
-                total += 1
-                same += b == h
-    return same, total
+            pub = [c.metrics.get(m) for c in setting if _number(c.metrics.get(m))]
+            now = [head[r]["metrics"].get(m) for r in head_ids if _number(head[r]["metrics"].get(m))]
+            if len(pub) < 2 or not now:
+                continue
+            mean, lo, hi = interval(pub)
+            head_mean = statistics.fmean(now)
+            rows.append({"arm": head[ids[0]]["arm"], "metric": m, "n_store": len(pub), "n_head": len(now),
+                         "store_mean": mean, "lo": lo, "hi": hi, "head_mean": head_mean, "diff": head_mean - mean,
+                         "inside": lo <= head_mean <= hi, "store_cpus": models})
+    return sorted(rows, key=lambda r: r["arm"]), same, total
+
+
+def _number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _cpu_model() -> str:
+    from gsbench.environment import cpu_facts
+    return str(cpu_facts().get("cpu_model"))
 
 
 def main() -> int:
@@ -119,21 +160,32 @@ def main() -> int:
             cells[i].update(run_tree(tree.resolve(), grid, args.seeds, args.work / f"tree{i}" / grid, args.jobs))
     rows, same, total = compare(cells[0], cells[1], args.metrics)
     print(f"baseline {args.tree[0]}  head {args.tree[1]}  seeds {args.seeds}")
-    print(f"{'arm':60s} {'metric':12s} {'n':>2s} {'base mean':>10s} {'95% interval':>21s} {'head mean':>10s} "
+    w = max([len(r["arm"]) for r in rows] + [3])
+    print(f"{'arm':{w}s} {'metric':12s} {'n':>2s} {'base mean':>10s} {'95% interval':>21s} {'head mean':>10s} "
           f"{'diff':>10s} inside")
     for r in rows:
         inside = "yes" if r["inside"] else "NO"
-        print(f"{r['arm'][:60]:60s} {r['metric']:12s} {r['n']:2d} {r['base_mean']:10.4f} "
+        print(f"{r['arm']:{w}s} {r['metric']:12s} {r['n']:2d} {r['base_mean']:10.4f} "
               f"[{r['lo']:9.4f}, {r['hi']:9.4f}] {r['head_mean']:10.4f} {r['diff']:+10.2e} {inside}")
     print(f"values equal on both checkouts: {same} of {total}")
     report = {"trees": [str(t) for t in args.tree], "seeds": args.seeds, "rows": rows, "same": same, "total": total}
     if args.store:
-        s_same, s_total = against_store(cells[1], args.store, args.metrics)
-        print(f"head values equal to the published store's ({args.store}): {s_same} of {s_total}")
-        report["store"] = {"same": s_same, "total": s_total}
+        s_rows, s_same, s_total = against_store(cells[1], args.store, args.metrics)
+        print(f"\nhead against the published store ({args.store}), its seeds of each setting "
+              f"(published on {', '.join(sorted({c for r in s_rows for c in r['store_cpus']})) or '-'}; "
+              f"this machine {_cpu_model()})")
+        print(f"{'arm':{w}s} {'metric':12s} {'n':>2s} {'store mean':>10s} {'95% interval':>21s} {'n':>2s} "
+              f"{'head mean':>10s} {'diff':>10s} inside")
+        for r in s_rows:
+            inside = "yes" if r["inside"] else "NO"
+            print(f"{r['arm']:{w}s} {r['metric']:12s} {r['n_store']:2d} {r['store_mean']:10.4f} "
+                  f"[{r['lo']:9.4f}, {r['hi']:9.4f}] {r['n_head']:2d} {r['head_mean']:10.4f} "
+                  f"{r['diff']:+10.2e} {inside}")
+        print(f"head values equal to the store's cells of this CPU family: {s_same} of {s_total}")
+        report["store"] = {"rows": s_rows, "same": s_same, "total": s_total}
     if args.json:
         args.json.write_text(json.dumps(report, indent=1))
-    return 0 if all(r["inside"] for r in rows) else 1
+    return 0 if all(r["inside"] for r in rows) else 1   # the store's rows inform; two CPU families may differ
 
 
 if __name__ == "__main__":

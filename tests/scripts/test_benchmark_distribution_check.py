@@ -2,7 +2,6 @@
 the seeds, the head's mean and their difference; equal cells counted; the published store compared."""
 from __future__ import annotations
 
-import json
 import math
 
 import pytest
@@ -39,10 +38,26 @@ def test_a_shift_beyond_the_interval_is_flagged():
     assert rows[0]["inside"]
 
 
-def test_head_cells_are_compared_with_the_published_store(tmp_path):
+def test_the_head_is_set_against_the_published_seeds_of_each_setting():
+    """Against the repository's own store: a head whose cells are the store's control_sem cells has
+    each arm's mean equal to the store's, inside its interval; shifted by 5 dB it falls outside. Value
+    for value only the cells of this machine's CPU family are compared."""
+    from paths import REPO_ROOT
+
+    from gsbench.environment import cpu_facts
+    from gsbench.grids.store import read_store
+    from gsbench.grids.verify import same_cpu
     bench = load_benchmark("distribution_check")
-    (tmp_path / "g").mkdir()
-    for run_id, v in (("a-0", 20.0), ("a-1", 99.0)):
-        (tmp_path / "g" / f"{run_id}.json").write_text(json.dumps({"results": {"metrics": {"psnr": v}}}))
-    head = _cells({"a": [20.0, 21.0, 22.0]})
-    assert bench.against_store(head, tmp_path, ["psnr"]) == (1, 2)   # a-2 is not in the store
+    store = REPO_ROOT / "results" / "cpu"
+    cells = [c for c in read_store(store) if c.grid == "control_sem-cpu"]
+    assert len(cells) >= 4
+    head = {c.run_id: {"arm": f"sem={c.record['cell']['axes']}", "seed": c.record["cell"]["seed"],
+                       "metrics": dict(c.metrics)} for c in cells}
+    rows, same, total = bench.against_store(head, store, ["psnr", "miou_3dovs"])
+    assert len(rows) == 4 and all(r["diff"] == 0 and r["inside"] for r in rows)
+    family = sum(same_cpu(c.record["provenance"], cpu_facts()) for c in cells)
+    assert (same, total) == (2 * family, 2 * family)
+    for c in head.values():
+        c["metrics"]["psnr"] += 5.0
+    rows, _, _ = bench.against_store(head, store, ["psnr"])
+    assert all(r["diff"] == pytest.approx(5.0) and not r["inside"] for r in rows)
