@@ -26,12 +26,13 @@ import yaml
 
 # (phase, substrings: a sample belongs to the phase when its stack holds any of them), first match wins
 PHASES: list[tuple[str, tuple[str, ...]]] = [
-    ("priors", ("gsbench/priors/", "priors_share.py")),
     ("periodic evaluations", ("periodic_eval", "_eval (gsbench/runs/training.py")),
     ("evaluation: decoder", ("decode (gsbench/train/autoencoder.py",)),
     ("evaluation: text cosines and pixel norms", ("_cosines (gsbench/evaluation/segmentation.py",)),
     ("evaluation: the rest", ("gsbench/evaluation/", "evaluate_run")),
+    # the autoencoder: a cell's own fit or restore, and a grid's shared fits
     ("autoencoder fit or restore", ("gsbench/train/autoencoder.py", "semantic_targets.py")),
+    ("priors", ("gsbench/priors/", "priors_share.py")),
     ("raster backward", ("_raster_backward", "raster_backward")),
     ("raster forward", ("_raster_forward", "raster_forward")),
     ("projection, forward and backward", ("cpu_projection.py", "_Projection", "project_gaussians")),
