@@ -96,7 +96,7 @@ def against_store(head: dict, store: Path, metrics: list[str]) -> tuple[list[dic
     over its published seeds, the head's mean over its seeds and their difference; and (equal,
     compared) values of the head cells the store holds from this machine's CPU family. Cells
     published on another CPU family are not compared value for value: their bits differ
-    (docs/training.md, "Reproducibility")."""
+    (docs/training.md, "The same numbers on any CPU")."""
     from gsbench.environment import cpu_facts
     from gsbench.grids.seed_spread import setting_key
     from gsbench.grids.store import read_store

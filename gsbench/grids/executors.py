@@ -5,8 +5,8 @@ The grid code only calls `executor.map(fn, items)`; it does not know which execu
 - `LocalExecutor(jobs)`: a process pool that starts a fresh worker process for every cell
   (max_tasks_per_child=1), so no cell inherits the memory peak, caches or torch state of an earlier
   one; each worker uses max(1, cores // jobs) threads (torch, numba, BLAS) so `--jobs N` never
-  oversubscribes the machine. Workers are forked from a forkserver that has imported gsbench, torch
-  and numba and loaded the cached numba kernels once (`WORKER_PRELOAD`, gsbench/grids/worker_preload.py)
+  oversubscribes the machine. Workers are forked from a forkserver that has imported gsbench, torch,
+  numba and pycolmap and loaded the cached numba kernels once (`WORKER_PRELOAD`, gsbench/grids/worker_preload.py)
   and run nothing: no torch thread pool, OpenMP team or CUDA context exists there to be forked (numba's
   tbb or workqueue pool is fork-safe), and each cell starts without its ~3 s of imports and ~1 s of
   kernel loading. On a CUDA machine each

@@ -4,9 +4,8 @@ from __future__ import annotations
 import math
 import os
 
-import numpy as np
 import pytest
-from pool_jobs import render_once, worker_info, worker_kernels, worker_pools
+from pool_jobs import worker_info, worker_pools
 
 from gsbench.grids.executors import LocalExecutor, SubmititExecutor, apply_thread_budget, make_executor
 
@@ -64,16 +63,41 @@ def test_make_executor_rejects_unknown():
         SubmititExecutor("x", cluster="pbs")
 
 
+KERNELS_PROBE = """
+import json, sys
+import numpy as np
+from pool_jobs import render_once, worker_kernels
+from gsbench.grids.executors import LocalExecutor
+here = [render_once(seed) for seed in (0, 1)]     # puts the kernels in numba's cache before the forkserver starts
+checks = []
+for threads in (1, 2):
+    out = LocalExecutor(jobs=1, threads=threads, progress=False).map(worker_kernels, [0, 1])
+    checks += [{"loaded": o["loaded"], "same": bool(np.array_equal(o["rgb"], h["rgb"])
+                                                     and np.array_equal(o["means_grad"], h["means_grad"]))}
+               for o, h in zip(out, here)]
+print(json.dumps(checks))
+"""
+
+
 def test_local_workers_start_with_the_cached_kernels_loaded():
-    """The forkserver loaded the kernels numba's cache holds (tests/conftest.py warms it), so a worker has
-    them before its first render, and its renders (threads forked after the kernels loaded) give this
-    process's bits."""
+    """The forkserver imported pycolmap and loaded the kernels numba's cache holds, so a worker has them
+    before its first render, and its renders (threads forked after the kernels loaded) give the bits
+    of the process that started the pool. In a fresh process, so its forkserver starts after the
+    cache holds the kernels."""
+    import json
+    import subprocess
+    import sys
+
+    from paths import REPO_ROOT
+
     from gsbench.render import cpu_kernels
     if not cpu_kernels.raster_forward.stats.cache_path:
         pytest.skip("numba caching is off")
-    for threads in (1, 2):
-        out = LocalExecutor(jobs=1, threads=threads, progress=False).map(worker_kernels, [0, 1])
-        assert all(o["loaded"]["raster_forward"] >= 1 and o["loaded"]["raster_backward"] >= 1 for o in out), out
-        for seed, o in enumerate(out):
-            here = render_once(seed)
-            assert np.array_equal(o["rgb"], here["rgb"]) and np.array_equal(o["means_grad"], here["means_grad"])
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT / "tests" / "support")}
+    res = subprocess.run([sys.executable, "-c", KERNELS_PROBE], env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    checks = json.loads(res.stdout.strip().splitlines()[-1])
+    assert len(checks) == 4
+    for c in checks:
+        assert c["loaded"]["raster_forward"] >= 1 and c["loaded"]["raster_backward"] >= 1 and c["loaded"]["pycolmap"]
+        assert c["same"]

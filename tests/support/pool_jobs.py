@@ -25,9 +25,12 @@ def worker_pools(_: int) -> dict:
 def worker_kernels(seed: int) -> dict:
     """Which cpu-backend kernels the worker had loaded before it ran anything, then one render's
     outputs (forward and backward through the parallel kernels) for comparison with another process."""
+    import sys
+
     from gsbench.render import cpu_kernels
     before = {"raster_forward": len(cpu_kernels.raster_forward.signatures),
-              "raster_backward": len(cpu_kernels.raster_backward.signatures)}
+              "raster_backward": len(cpu_kernels.raster_backward.signatures),
+              "pycolmap": "pycolmap" in sys.modules}
     return {"loaded": before, **render_once(seed)}
 
 
