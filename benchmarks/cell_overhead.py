@@ -27,13 +27,20 @@ from pathlib import Path
 import yaml
 
 
-def run_tree(tree: Path, grid: str, seeds: list[int], work: Path, jobs: int = 1) -> dict:
-    """Run the trimmed grid with `tree`'s gsbench; its per-cell phases and the command's wall time."""
+def trimmed_grid(tree: Path, grid: str, seeds: list[int], work: Path) -> Path:
+    """`tree`'s own file of grid `grid` with only `seeds` (and no later seeds), written into `work`."""
     raw = yaml.safe_load((tree / "gsbench" / "grids" / f"{grid}.yaml").read_text())
     raw["seeds"] = seeds
+    raw.pop("later_seeds", None)
     work.mkdir(parents=True, exist_ok=True)
     grid_file = work / f"{grid}.yaml"
     grid_file.write_text(yaml.safe_dump(raw, sort_keys=False))
+    return grid_file
+
+
+def run_tree(tree: Path, grid: str, seeds: list[int], work: Path, jobs: int = 1) -> dict:
+    """Run the trimmed grid with `tree`'s gsbench; its per-cell phases and the command's wall time."""
+    grid_file = trimmed_grid(tree, grid, seeds, work)
     t0 = time.perf_counter()
     subprocess.run([str(tree / ".venv" / "bin" / "gsbench"), "-q", "ablate", "--grid", str(grid_file), "--out",
                     str(work / "runs"), "--executor", "local", "--jobs", str(jobs), "--no-progress"], check=True)

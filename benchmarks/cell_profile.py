@@ -22,7 +22,8 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-import yaml
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cell_overhead import trimmed_grid  # noqa: E402  (a script beside this one)
 
 # (phase, substrings: a sample belongs to the phase when its stack holds any of them), first match wins
 PHASES: list[tuple[str, tuple[str, ...]]] = [
@@ -68,12 +69,7 @@ def read_raw(path: Path, rate: float) -> Counter:
 
 def profile_tree(tree: Path, grid: str, seeds: list[int], work: Path, rate: float, py_spy: str) -> dict:
     """Run the trimmed grid under py-spy with `tree`'s gsbench; seconds per phase and the cell count."""
-    raw = yaml.safe_load((tree / "gsbench" / "grids" / f"{grid}.yaml").read_text())
-    raw["seeds"] = seeds
-    raw.pop("later_seeds", None)
-    work.mkdir(parents=True, exist_ok=True)
-    grid_file = work / f"{grid}.yaml"
-    grid_file.write_text(yaml.safe_dump(raw, sort_keys=False))
+    grid_file = trimmed_grid(tree, grid, seeds, work)
     out = work / "py-spy.txt"
     subprocess.run([py_spy, "record", "--subprocesses", "--rate", str(int(rate)), "--format", "raw", "--output",
                     str(out), "--", str(tree / ".venv" / "bin" / "gsbench"), "-q", "ablate", "--grid", str(grid_file),

@@ -29,20 +29,17 @@ import subprocess
 import sys
 from pathlib import Path
 
-import yaml
 from scipy import stats
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cell_overhead import trimmed_grid  # noqa: E402  (a script beside this one)
 
 METRICS = ("psnr", "miou_3dovs", "mbiou_3dovs")
 
 
 def run_tree(tree: Path, grid: str, seeds: list[int], work: Path, jobs: int) -> dict[str, dict]:
     """Run `tree`'s grid file trimmed to `seeds`; {run_id: {"arm", "seed", "metrics"}} of its done cells."""
-    raw = yaml.safe_load((tree / "gsbench" / "grids" / f"{grid}.yaml").read_text())
-    raw["seeds"] = seeds
-    raw.pop("later_seeds", None)
-    work.mkdir(parents=True, exist_ok=True)
-    grid_file = work / f"{grid}.yaml"
-    grid_file.write_text(yaml.safe_dump(raw, sort_keys=False))
+    grid_file = trimmed_grid(tree, grid, seeds, work)
     runs = work / "runs"
     subprocess.run([str(tree / ".venv" / "bin" / "gsbench"), "-q", "ablate", "--grid", str(grid_file), "--out",
                     str(runs), "--executor", "local", "--jobs", str(jobs), "--no-progress"], check=True)
