@@ -38,12 +38,17 @@ def trimmed_grid(tree: Path, grid: str, seeds: list[int], work: Path) -> Path:
     return grid_file
 
 
+def ablate_argv(tree: Path, grid_file: Path, runs: Path, jobs: int) -> list[str]:
+    """`tree`'s `gsbench ablate` of `grid_file` into `runs`, a process per cell, `jobs` at a time."""
+    return [str(tree / ".venv" / "bin" / "gsbench"), "-q", "ablate", "--grid", str(grid_file), "--out", str(runs),
+            "--executor", "local", "--jobs", str(jobs), "--no-progress"]
+
+
 def run_tree(tree: Path, grid: str, seeds: list[int], work: Path, jobs: int = 1) -> dict:
     """Run the trimmed grid with `tree`'s gsbench; its per-cell phases and the command's wall time."""
     grid_file = trimmed_grid(tree, grid, seeds, work)
     t0 = time.perf_counter()
-    subprocess.run([str(tree / ".venv" / "bin" / "gsbench"), "-q", "ablate", "--grid", str(grid_file), "--out",
-                    str(work / "runs"), "--executor", "local", "--jobs", str(jobs), "--no-progress"], check=True)
+    subprocess.run(ablate_argv(tree, grid_file, work / "runs", jobs), check=True)
     wall = time.perf_counter() - t0
     cells = []
     for status in sorted((work / "runs").glob("*/cell_status.json")):

@@ -23,7 +23,7 @@ from collections import Counter
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cell_overhead import trimmed_grid  # noqa: E402  (a script beside this one)
+from cell_overhead import ablate_argv, trimmed_grid  # noqa: E402  (a script beside this one)
 
 # (phase, substrings: a sample belongs to the phase when its stack holds any of them), first match wins
 PHASES: list[tuple[str, tuple[str, ...]]] = [
@@ -72,8 +72,7 @@ def profile_tree(tree: Path, grid: str, seeds: list[int], work: Path, rate: floa
     grid_file = trimmed_grid(tree, grid, seeds, work)
     out = work / "py-spy.txt"
     subprocess.run([py_spy, "record", "--subprocesses", "--rate", str(int(rate)), "--format", "raw", "--output",
-                    str(out), "--", str(tree / ".venv" / "bin" / "gsbench"), "-q", "ablate", "--grid", str(grid_file),
-                    "--out", str(work / "runs"), "--executor", "local", "--jobs", "1", "--no-progress"], check=True)
+                    str(out), "--", *ablate_argv(tree, grid_file, work / "runs", 1)], check=True)
     cells = len(list((work / "runs").glob("*/results.json")))
     return {"tree": str(tree), "cells": cells, "seconds": dict(read_raw(out, rate))}
 

@@ -29,10 +29,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-from scipy import stats
+from gsbench.reports.stats import t_quantile
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cell_overhead import trimmed_grid  # noqa: E402  (a script beside this one)
+from cell_overhead import ablate_argv, trimmed_grid  # noqa: E402  (a script beside this one)
 
 METRICS = ("psnr", "miou_3dovs", "mbiou_3dovs")
 
@@ -41,8 +41,7 @@ def run_tree(tree: Path, grid: str, seeds: list[int], work: Path, jobs: int) -> 
     """Run `tree`'s grid file trimmed to `seeds`; {run_id: {"arm", "seed", "metrics"}} of its done cells."""
     grid_file = trimmed_grid(tree, grid, seeds, work)
     runs = work / "runs"
-    subprocess.run([str(tree / ".venv" / "bin" / "gsbench"), "-q", "ablate", "--grid", str(grid_file), "--out",
-                    str(runs), "--executor", "local", "--jobs", str(jobs), "--no-progress"], check=True)
+    subprocess.run(ablate_argv(tree, grid_file, runs, jobs), check=True)
     plan = json.loads((runs / f"grid-{grid}.json").read_text())
     out = {}
     for cell in plan["cells"]:
@@ -61,7 +60,7 @@ def interval(values: list[float]) -> tuple[float, float, float]:
     mean = statistics.fmean(values)
     if len(values) < 2:
         return mean, math.nan, math.nan
-    half = float(stats.t.ppf(0.975, len(values) - 1)) * statistics.stdev(values) / math.sqrt(len(values))
+    half = t_quantile(len(values) - 1) * statistics.stdev(values) / math.sqrt(len(values))
     return mean, mean - half, mean + half
 
 
@@ -74,7 +73,7 @@ def compare(base: dict, head: dict, metrics: list[str]) -> tuple[list[dict], int
         ids = sorted(r for r, c in base.items() if c["arm"] == arm and r in head)
         for m in metrics:
             pairs = [(base[r]["metrics"].get(m), head[r]["metrics"].get(m)) for r in ids]
-            pairs = [(b, h) for b, h in pairs if isinstance(b, (int, float)) and isinstance(h, (int, float))]
+            pairs = [(b, h) for b, h in pairs if _number(b) and _number(h)]
             if not pairs:
                 continue
             total += len(pairs)

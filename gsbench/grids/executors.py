@@ -8,8 +8,8 @@ The grid code only calls `executor.map(fn, items)`; it does not know which execu
   oversubscribes the machine. Workers are forked from a forkserver that has imported gsbench, torch,
   numba and pycolmap and loaded the cached numba kernels once (`WORKER_PRELOAD`, gsbench/grids/worker_preload.py)
   and run nothing: no torch thread pool, OpenMP team or CUDA context exists there to be forked (numba's
-  tbb or workqueue pool is fork-safe), and each cell starts without its ~3 s of imports and ~1 s of
-  kernel loading. On a CUDA machine each
+  tbb or workqueue pool is fork-safe), and each cell starts without its ~3 s of imports and ~0.45 s
+  of kernel loading. On a CUDA machine each
   worker takes a GPU from a pool of `jobs` slots (slot k on the (k % n)-th GPU this process sees) and
   gives it back when it exits. A worker's CUDA_VISIBLE_DEVICES is that GPU's entry of the parent's own
   list (an index or a UUID), so under CUDA_VISIBLE_DEVICES=2,3 the workers use GPUs 2 and 3, not 0 and 1.
