@@ -26,7 +26,6 @@ import json
 import statistics
 import sys
 import tempfile
-import time
 import warnings
 from functools import partial
 from pathlib import Path
@@ -42,7 +41,7 @@ from gsbench.render import cpu_backend as CB
 from gsbench.render import cpu_kernels as K
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from raster_pairs import capture  # noqa: E402  (a script beside this one)
+from raster_pairs import best, capture  # noqa: E402  (a script beside this one)
 
 _FWD_LANE = "alpha = min(op * _expw(power), amax)\n                            tp = st[p]"
 _FWD_CH = """                    for k in range(n_ch if c_hi >= c_lo else 0):
@@ -190,23 +189,14 @@ def run_passes(mod, args, kw, g_outs, g_t):
     return (*outs, t_out), full
 
 
-def _best(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
-
-
 def time_passes(mod, captured: list, grads: list, repeats: int) -> dict:
     """Mean over views of the best-of-`repeats` ms of each pass with kernels `mod`."""
     fwd, bwd = [], []
     with _Kernels(mod):
         for (args, kw), (g_outs, g_t) in zip(captured, grads):
             _, _, state = CB._raster_forward(*args, **kw)
-            fwd.append(_best(partial(CB._raster_forward, *args, **kw), repeats) * 1e3)
-            bwd.append(_best(partial(CB._raster_backward, state, g_outs, g_t), repeats) * 1e3)
+            fwd.append(best(partial(CB._raster_forward, *args, **kw), repeats) * 1e3)
+            bwd.append(best(partial(CB._raster_backward, state, g_outs, g_t), repeats) * 1e3)
     return {"forward": statistics.fmean(fwd), "backward": statistics.fmean(bwd)}
 
 
