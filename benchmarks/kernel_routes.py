@@ -201,7 +201,8 @@ def time_passes(mod, captured: list, grads: list, repeats: int) -> dict:
 
 
 def same_bits(a: tuple, b: tuple) -> bool:
-    return all(x.shape == y.shape and np.array_equal(x, y, equal_nan=True) for x, y in zip(a, b))
+    """Whether two tuples of arrays are equal element for element (NaN equal to NaN), shapes included."""
+    return len(a) == len(b) and all(x.shape == y.shape and np.array_equal(x, y, equal_nan=True) for x, y in zip(a, b))
 
 
 def measure(captured: list, names: list[str], repeats: int, rounds: int, threads: int) -> dict:

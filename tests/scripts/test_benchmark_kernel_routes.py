@@ -36,6 +36,7 @@ def test_same_bits_compares_every_output(routes):
     a = (np.zeros((2, 2), np.float32), np.array([np.nan, 1.0]))
     assert routes.same_bits(a, (a[0].copy(), a[1].copy()))
     assert not routes.same_bits(a, (a[0] + np.float32(1e-7), a[1]))
+    assert not routes.same_bits(a, a[:1])
 
 
 @pytest.mark.slow
