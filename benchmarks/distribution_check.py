@@ -29,7 +29,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from gsbench.reports.stats import t_quantile
+from gsbench.reports.stats import mean_band
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cell_overhead import ablate_argv, trimmed_grid  # noqa: E402  (a script beside this one)
@@ -57,11 +57,8 @@ def run_tree(tree: Path, grid: str, seeds: list[int], work: Path, jobs: int) -> 
 
 def interval(values: list[float]) -> tuple[float, float, float]:
     """Mean and its 95 % t-interval (nan bounds for fewer than two values)."""
-    mean = statistics.fmean(values)
-    if len(values) < 2:
-        return mean, math.nan, math.nan
-    half = t_quantile(len(values) - 1) * statistics.stdev(values) / math.sqrt(len(values))
-    return mean, mean - half, mean + half
+    mean, half = mean_band(values)
+    return (mean, math.nan, math.nan) if half is None else (mean, mean - half, mean + half)
 
 
 def compare(base: dict, head: dict, metrics: list[str]) -> tuple[list[dict], int, int]:

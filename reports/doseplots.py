@@ -19,7 +19,7 @@ from gsbench.reports.plots import _save, plt
 
 from gsbench.reports.display import (AX_LAMBDAS, AX_LATENT, AX_NOISE_SEVERITY, AX_NOISE_TYPE, AX_VIEWS,  # isort: skip
                                   NOISE_LABELS, metric_spec)
-from gsbench.reports.stats import t_quantile
+from gsbench.reports.stats import mean_band
 from gsbench.reports.studies import PROTOCOL_SHORT, _get, _slug, scene_protocols
 
 
@@ -52,16 +52,6 @@ DOSES: list[Dose] = [
     Dose("control_latent", AX_LATENT, "miou", "latent dimension d (14-class control)", 3.0,
          paper_note="paper default d = 3"),
 ]
-
-
-def mean_band(values: list[float]) -> tuple[float, float | None]:
-    """Mean and the half-width of its 95 % t interval (None with one value)."""
-    n = len(values)
-    m = math.fsum(values) / n
-    if n < 2:
-        return m, None
-    sd = math.sqrt(math.fsum((v - m) ** 2 for v in values) / (n - 1))
-    return m, t_quantile(n - 1) * sd / math.sqrt(n)
 
 
 def _curve(res: Results, ids: list[str], axis: str, concrete: str, scale: float) -> list[tuple[float, float, Any, int]]:

@@ -106,6 +106,16 @@ def t_quantile(df: float) -> float:
     return float(sps.t.ppf(0.5 + LEVEL / 2.0, df))
 
 
+def mean_band(values: list[float]) -> tuple[float, float | None]:
+    """Mean and the half-width of its 95 % t interval (None with one value)."""
+    n = len(values)
+    m = math.fsum(values) / n
+    if n < 2:
+        return m, None
+    sd = math.sqrt(math.fsum((v - m) ** 2 for v in values) / (n - 1))
+    return m, t_quantile(n - 1) * sd / math.sqrt(n)
+
+
 def t_power(ncp: float, df: float) -> float:
     """Power of the two-sided 5 % t test at df degrees of freedom when the t statistic is noncentral
     with noncentrality ncp. The lower tail is read as the upper tail at -ncp: scipy's nct.cdf returns
